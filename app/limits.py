@@ -1,0 +1,46 @@
+"""Velocity limiting: every command to the driver passes through here, whoever produced it.
+
+The profile's speed limits are clamped, then its acceleration limits are applied per control period
+(the dynamic window the base can actually follow). Each limited component is reported so the
+operator sees why the robot is slower than asked.
+"""
+
+from __future__ import annotations
+
+import math
+
+from nav.types import Twist2D
+from robot.profiles import Limits
+
+
+def clamp_speed(cmd: Twist2D, limits: Limits, omni: bool) -> tuple[Twist2D, tuple[str, ...]]:
+    clamped: list[str] = []
+    vx = min(max(cmd.vx, limits.min_vel_x if limits.min_vel_x < 0 else -limits.max_vel_x), limits.max_vel_x)
+    if vx != cmd.vx:
+        clamped.append("linear.x")
+    max_vy = limits.max_vel_y if omni else 0.0
+    vy = min(max(cmd.vy, -max_vy), max_vy)
+    if vy != cmd.vy:
+        clamped.append("linear.y")
+    wz = min(max(cmd.wz, -limits.max_vel_theta), limits.max_vel_theta)
+    if wz != cmd.wz:
+        clamped.append("angular.z")
+    return Twist2D(vx, vy, wz), tuple(clamped)
+
+
+def _ramp(target: float, current: float, acc: float, decel: float, dt: float) -> float:
+    """Move ``current`` toward ``target`` by at most acc*dt when speeding up, |decel|*dt when slowing."""
+    speeding_up = abs(target) > abs(current) and (target * current >= 0)
+    step = (acc if speeding_up else abs(decel) or acc) * dt
+    if step <= 0 or not math.isfinite(step):
+        return target
+    return current + min(max(target - current, -step), step)
+
+
+def limit_acceleration(cmd: Twist2D, previous: Twist2D, limits: Limits, dt: float) -> Twist2D:
+    return Twist2D(
+        _ramp(cmd.vx, previous.vx, limits.acc_lim_x, limits.decel_lim_x, dt),
+        _ramp(cmd.vy, previous.vy, limits.acc_lim_y or limits.acc_lim_x, limits.decel_lim_y or limits.decel_lim_x,
+              dt),
+        _ramp(cmd.wz, previous.wz, limits.acc_lim_theta, limits.decel_lim_theta, dt),
+    )

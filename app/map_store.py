@@ -1,0 +1,135 @@
+"""Maps in the database: occupancy grids stored compressed with their geometry and a thumbnail."""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+
+import numpy as np
+from sqlalchemy.engine import Engine
+from sqlmodel import Session, select
+
+from app.models import MapRecord, utcnow
+from maps.render import thumbnail_png
+from nav.types import GridGeometry, OccupancyGrid, Pose2D
+
+
+@dataclass(frozen=True)
+class MapInfo:
+    id: int
+    name: str
+    resolution: float
+    width: int
+    height: int
+    origin: tuple[float, float, float]
+    source: str
+    is_stock: bool
+    robot_id: int | None
+    run_id: int | None
+    created_at: datetime
+    updated_at: datetime
+
+    def as_dict(self) -> dict:
+        return {
+            "id": self.id, "name": self.name, "resolution": self.resolution, "width": self.width,
+            "height": self.height, "size_m": [round(self.width * self.resolution, 3),
+                                              round(self.height * self.resolution, 3)],
+            "origin": list(self.origin), "source": self.source, "is_stock": self.is_stock,
+            "robot_id": self.robot_id, "run_id": self.run_id,
+            "created_at": self.created_at.isoformat(), "updated_at": self.updated_at.isoformat(),
+            "thumbnail_url": f"/api/maps/{self.id}/thumbnail.png",
+        }
+
+
+def _info(rec: MapRecord) -> MapInfo:
+    assert rec.id is not None
+    return MapInfo(rec.id, rec.name, rec.resolution, rec.width, rec.height,
+                   (rec.origin_x, rec.origin_y, rec.origin_yaw), rec.source, rec.is_stock, rec.robot_id,
+                   rec.run_id, rec.created_at, rec.updated_at)
+
+
+def grid_of(rec: MapRecord) -> OccupancyGrid:
+    data = np.frombuffer(zlib.decompress(rec.data), dtype=np.int8).reshape(rec.height, rec.width).copy()
+    geom = GridGeometry(rec.resolution, rec.width, rec.height, Pose2D(rec.origin_x, rec.origin_y, rec.origin_yaw))
+    return OccupancyGrid(geom, data)
+
+
+class MapStore:
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+
+    def add(self, name: str, grid: OccupancyGrid, *, source: str = "import", is_stock: bool = False,
+            robot_id: int | None = None, run_id: int | None = None) -> MapInfo:
+        """Store a map in one transaction (all or nothing)."""
+        g = grid.geometry
+        rec = MapRecord(
+            name=name, resolution=g.resolution, origin_x=g.origin.x, origin_y=g.origin.y,
+            origin_yaw=g.origin.theta, width=g.width, height=g.height,
+            data=zlib.compress(np.ascontiguousarray(grid.data, dtype=np.int8).tobytes(), 6),
+            thumbnail_png=thumbnail_png(grid), source=source, is_stock=is_stock, robot_id=robot_id,
+            run_id=run_id,
+        )
+        with Session(self.engine, expire_on_commit=False) as s:
+            s.add(rec)
+            s.commit()
+            s.refresh(rec)
+        return _info(rec)
+
+    def list(self) -> list[MapInfo]:
+        with Session(self.engine) as s:
+            recs = s.exec(select(MapRecord).order_by(MapRecord.is_stock, MapRecord.created_at.desc())).all()
+            return [_info(r) for r in recs]
+
+    def info(self, map_id: int) -> MapInfo | None:
+        with Session(self.engine) as s:
+            rec = s.get(MapRecord, map_id)
+            return _info(rec) if rec else None
+
+    def find(self, name: str, *, stock: bool | None = None) -> MapInfo | None:
+        with Session(self.engine) as s:
+            q = select(MapRecord).where(MapRecord.name == name)
+            if stock is not None:
+                q = q.where(MapRecord.is_stock == stock)
+            rec = s.exec(q.order_by(MapRecord.id)).first()
+            return _info(rec) if rec else None
+
+    def grid(self, map_id: int) -> OccupancyGrid | None:
+        with Session(self.engine) as s:
+            rec = s.get(MapRecord, map_id)
+            return grid_of(rec) if rec else None
+
+    def thumbnail(self, map_id: int) -> bytes | None:
+        with Session(self.engine) as s:
+            rec = s.get(MapRecord, map_id)
+            return rec.thumbnail_png if rec else None
+
+    def rename(self, map_id: int, name: str) -> MapInfo | None:
+        with Session(self.engine, expire_on_commit=False) as s:
+            rec = s.get(MapRecord, map_id)
+            if rec is None:
+                return None
+            rec.name = name
+            rec.updated_at = utcnow()
+            s.add(rec)
+            s.commit()
+            s.refresh(rec)
+            return _info(rec)
+
+    def delete(self, map_id: int) -> bool:
+        with Session(self.engine) as s:
+            rec = s.get(MapRecord, map_id)
+            if rec is None:
+                return False
+            s.delete(rec)
+            s.commit()
+            return True
+
+    def register_stock(self, worlds: dict[str, Path], load) -> list[MapInfo]:
+        """Register each stock world once (by name), loading it with ``load(path) -> OccupancyGrid``."""
+        added = []
+        for name, path in worlds.items():
+            if self.find(name, stock=True) is None:
+                added.append(self.add(name, load(path), source="stock", is_stock=True))
+        return added

@@ -1,0 +1,72 @@
+"""Everything one navdeck process runs, built from Settings and torn down in order."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+
+from sqlalchemy.engine import Engine
+
+from app.control import ControlLease
+from app.db import make_engine, migrate
+from app.drivers import make_driver
+from app.map_store import MapStore
+from app.session import Session, SessionOptions
+from app.settings import Settings
+from robot.clock import Clock, RealClock
+from robot.profiles import RobotProfile, load_profile
+
+log = logging.getLogger("navdeck")
+
+
+@dataclass
+class Runtime:
+    settings: Settings
+    profile: RobotProfile
+    engine: Engine
+    maps: MapStore
+    session: Session
+    lease: ControlLease = field(default_factory=ControlLease)
+    viewer: object | None = None
+    world_name: str | None = None
+
+    @classmethod
+    def build(cls, settings: Settings, clock: Clock | None = None) -> Runtime:
+        profile = load_profile(settings.profile)
+        engine = make_engine(settings.db_url)
+        migrate(engine)
+        maps = MapStore(engine)
+        _register_stock_maps(maps)
+        clock = clock or RealClock()
+        bundle = make_driver(settings.robot, profile, settings.world, clock, settings.seed)
+        session = Session(bundle.driver, clock=clock, grid=bundle.grid, start_pose=bundle.start_pose,
+                          options=SessionOptions(rate_hz=settings.rate_hz), robot_name=settings.robot_name)
+        return cls(settings, profile, engine, maps, session, world_name=bundle.world_name)
+
+    def start(self) -> None:
+        self.session.start()
+        if self.settings.viewer:
+            from app.viewer.scene import Viewer
+
+            self.viewer = Viewer(self.session.bus)
+            self.session_viewer_hooks()
+            self.viewer.start()
+
+    def session_viewer_hooks(self) -> None:
+        """Clicks in the 3D view become session requests (wired up by the navigation features)."""
+
+    def close(self) -> None:
+        if self.viewer is not None:
+            try:
+                self.viewer.stop()
+            except Exception:
+                log.exception("viewer stop failed")
+        self.session.close()
+        self.engine.dispose()
+
+
+def _register_stock_maps(maps: MapStore) -> None:
+    from maps.mapio import load_map_yaml
+    from maps.stock import available_worlds, stock_world_path
+
+    maps.register_stock({name: stock_world_path(name) for name in available_worlds()}, load_map_yaml)

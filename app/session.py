@@ -1,0 +1,354 @@
+"""The session: owns the driver and runs the fixed-rate control loop off the asyncio event loop.
+
+One tick: read the driver -> odometry -> (SLAM / localization) -> pick the command for the mode
+(teleop, navigator, behaviour) -> safety and limits -> ``driver.command`` -> publish a snapshot.
+Other threads talk to the loop through short locked setters (teleop command, mode requests, e-stop);
+nothing in a tick waits on the database, the planner, the viewer or a client.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.bus import Snapshot, SnapshotBus
+from app.limits import clamp_speed, limit_acceleration
+from app.modes import Mode, ModeMachine
+from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
+from robot.base import Driver, LinkState, SensorFrame
+from robot.clock import Clock, RealClock
+from robot.odometry import WheelOdometry
+
+log = logging.getLogger("navdeck.session")
+
+
+@dataclass(frozen=True)
+class SessionOptions:
+    rate_hz: float = 20.0  # control loop rate
+    deadman_timeout: float = 0.5  # s without a teleop command -> stop
+    lidar_timeout: float = 1.5  # s without a scan while moving the robot -> FAULT
+    trail_length: int = 2000  # poses kept for the odometry trail
+    trail_min_step: float = 0.02  # m between trail points
+
+
+@dataclass
+class TeleopState:
+    command: Twist2D = ZERO_TWIST
+    stamp: float = -math.inf
+    client: str | None = None
+
+
+@dataclass
+class LoopStats:
+    """Control-loop timing: lateness of each tick's start against its schedule and tick duration."""
+
+    lateness_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
+    duration_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
+    overruns: int = 0
+    ticks: int = 0
+
+    def summary(self) -> dict[str, float]:
+        late = np.fromiter(tuple(self.lateness_ms), float)
+        dur = np.fromiter(tuple(self.duration_ms), float)
+        if late.size == 0 or dur.size == 0:
+            return {"ticks": self.ticks}
+        return {
+            "ticks": self.ticks,
+            "overruns": self.overruns,
+            "lateness_p50_ms": float(np.percentile(late, 50)),
+            "lateness_p99_ms": float(np.percentile(late, 99)),
+            "tick_p50_ms": float(np.percentile(dur, 50)),
+            "tick_p99_ms": float(np.percentile(dur, 99)),
+        }
+
+
+class Session:
+    def __init__(
+        self,
+        driver: Driver,
+        *,
+        clock: Clock | None = None,
+        grid: OccupancyGrid | None = None,
+        start_pose: Pose2D = Pose2D(),
+        options: SessionOptions = SessionOptions(),
+        robot_name: str = "navdeck",
+    ) -> None:
+        self.driver = driver
+        self.profile = driver.profile
+        self.clock: Clock = clock or RealClock()
+        self.options = options
+        self.robot_name = robot_name
+        self.period = 1.0 / options.rate_hz
+        self.bus = SnapshotBus()
+        self.events: deque[dict] = deque(maxlen=500)  # recent events for the UI and the recorder
+        self.event_listeners: list[Callable[[dict], None]] = []
+        self.modes = ModeMachine(on_change=self._on_mode_change)
+        self.odometry = WheelOdometry(self.profile)
+        self.grid = grid
+        self.grid_version = 1 if grid is not None else 0
+        self.map_to_odom = start_pose  # odom starts at the start pose until localization says otherwise
+        self.pose = start_pose
+        self.odom_pose = Pose2D()
+        self.velocity = ZERO_TWIST
+        self.wheel_slip = False
+        self.last_command = ZERO_TWIST
+        self.last_clamped: tuple[str, ...] = ()
+        self.last_scan: LaserScan | None = None
+        self.last_scan_time = -math.inf
+        self.battery_v: float | None = None
+        self.link_state = LinkState.OK
+        self.link_reason = ""
+        self.fault: str | None = None
+        self.estop_latched = False
+        self.collisions = 0
+        self.distance_travelled = 0.0
+        self.stats = LoopStats()
+        self._teleop = TeleopState()
+        self._lock = threading.Lock()
+        self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
+        self._seq = 0
+        self._stop = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._tick_hooks: list[Callable[[Session, SensorFrame], None]] = []
+        self._reset_driver = False
+        self.started_at = self.clock.now()
+
+    # ------------------------------------------------------------------ commands from other threads
+    def set_teleop(self, cmd: Twist2D, client: str) -> None:
+        """Store an operator's velocity command (teleop websocket). Applied while the mode allows it."""
+        with self._lock:
+            self._teleop = TeleopState(cmd, self.clock.now(), client)
+
+    def stop_teleop(self, client: str | None = None) -> None:
+        with self._lock:
+            if client is None or self._teleop.client in (client, None):
+                self._teleop = TeleopState(ZERO_TWIST, self.clock.now(), None)
+
+    def request_mode(self, mode: str) -> Mode:
+        """Operator mode request; raises app.modes.TransitionRefused."""
+        return self.modes.request(mode)
+
+    def estop(self, source: str = "operator") -> None:
+        """Latch the e-stop. The driver is stopped at the latest at the next tick."""
+        with self._lock:
+            self.estop_latched = True
+            self._teleop = TeleopState()
+        self.modes.enter(Mode.ESTOP, f"e-stop by {source}")
+
+    def reset(self) -> Mode:
+        """Release the e-stop latch or clear a fault (refused while the fault is still present)."""
+        blocked = self._fault_still_present()
+        mode = self.modes.reset(blocked_by=blocked)
+        with self._lock:
+            self.estop_latched = False
+            self.fault = None
+        self._reset_driver = True
+        return mode
+
+    def add_tick_hook(self, hook: Callable[[Session, SensorFrame], None]) -> None:
+        """Run ``hook(session, frame)`` after odometry each tick (pipeline stages plug in here)."""
+        self._tick_hooks.append(hook)
+
+    # ------------------------------------------------------------------ loop
+    def start(self) -> None:
+        if self._thread is not None:
+            return
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._run, name="control-loop", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        try:
+            self.driver.stop()
+        finally:
+            self.driver.close()
+
+    def _run(self) -> None:
+        next_t = self.clock.now()
+        while not self._stop.is_set():
+            start = self.clock.now()
+            self.stats.lateness_ms.append(max(0.0, (start - next_t) * 1e3))
+            t0 = time.perf_counter()
+            try:
+                self.step()
+            except Exception as exc:  # a bug in a stage must stop the robot, not kill the loop silently
+                log.exception("control tick failed")
+                self._enter_fault(f"internal error: {exc}")
+                self._safe_stop()
+            self.stats.duration_ms.append((time.perf_counter() - t0) * 1e3)
+            next_t += self.period
+            now = self.clock.now()
+            if now > next_t + self.period:  # overran by a whole period: skip, don't try to catch up
+                self.stats.overruns += 1
+                next_t = now
+            self.clock.sleep_until(next_t, self._stop)
+
+    def run_for(self, seconds: float) -> None:
+        """Step the loop synchronously for ``seconds`` of clock time (virtual-clock tests and benches)."""
+        n = max(1, round(seconds / self.period))
+        for _ in range(n):
+            self.clock.sleep_until(self.clock.now() + self.period)
+            self.step()
+
+    def step(self) -> None:
+        now = self.clock.now()
+        self.stats.ticks += 1
+        frame = self.driver.read()
+        self._ingest(frame, now)
+        for hook in self._tick_hooks:
+            hook(self, frame)
+        cmd = self._choose_command(now)
+        self._send(cmd)
+        self._publish(now)
+
+    # ------------------------------------------------------------------ tick stages
+    def _ingest(self, frame: SensorFrame, now: float) -> None:
+        if frame.ticks is not None:
+            prev = self.odom_pose
+            odo = self.odometry.update(frame.ticks, frame.imu)
+            self.odom_pose, self.velocity, self.wheel_slip = odo.pose, odo.twist, odo.slipping
+            self.distance_travelled += prev.distance_to(self.odom_pose)
+        self.pose = self.map_to_odom.compose(self.odom_pose)
+        if not self._trail or math.hypot(
+            self.pose.x - self._trail[-1][0], self.pose.y - self._trail[-1][1]
+        ) >= self.options.trail_min_step:
+            self._trail.append((self.pose.x, self.pose.y))
+        if frame.scan is not None:
+            self.last_scan = frame.scan
+            self.last_scan_time = now
+        if frame.battery_v is not None:
+            self.battery_v = frame.battery_v
+        if frame.collision:
+            self.collisions += 1
+            self.add_event("collision", pose=[self.pose.x, self.pose.y, self.pose.theta])
+        self.link_state, self.link_reason = frame.link.state, frame.link.reason
+        fault = frame.fault
+        if fault is None and frame.link.state == LinkState.LOST:
+            fault = f"link lost: {frame.link.reason or 'no telemetry'}"
+        if fault is None and now - self.last_scan_time > self.options.lidar_timeout and now - self.started_at > (
+            self.options.lidar_timeout
+        ):
+            fault = f"lidar: no scan for {now - self.last_scan_time:.1f} s"
+        if fault is not None and self.fault is None:
+            self._enter_fault(fault)
+
+    def _choose_command(self, now: float) -> Twist2D | None:
+        """The command for this tick before limits; None means stop now (no ramp)."""
+        mode = self.modes.mode
+        if self.estop_latched or mode in (Mode.ESTOP, Mode.FAULT) or self.fault is not None:
+            return None
+        if mode in (Mode.TELEOP, Mode.MAPPING):
+            with self._lock:
+                tele = self._teleop
+            if now - tele.stamp > self.options.deadman_timeout:
+                return ZERO_TWIST
+            return tele.command
+        return ZERO_TWIST
+
+    def _send(self, cmd: Twist2D | None) -> None:
+        if self._reset_driver:
+            self._reset_driver = False
+            self.driver.reset()
+        if cmd is None:
+            self._safe_stop()
+            return
+        limited, clamped = clamp_speed(cmd, self.profile.limits, self.profile.is_omni)
+        limited = limit_acceleration(limited, self.last_command, self.profile.limits, self.period)
+        self.last_clamped = clamped
+        self.last_command = limited
+        self.driver.command(limited)
+
+    def _safe_stop(self) -> None:
+        self.last_command = ZERO_TWIST
+        self.last_clamped = ()
+        if self.estop_latched:
+            self.driver.estop()
+        else:
+            self.driver.stop()
+
+    def _publish(self, now: float) -> None:
+        self._seq += 1
+        snap = Snapshot(
+            stamp=now,
+            seq=self._seq,
+            mode=self.modes.mode.value,
+            pose=self.pose,
+            odom_pose=self.odom_pose,
+            velocity=self.velocity,
+            command=self.last_command,
+            clamped=self.last_clamped,
+            scan=self.last_scan,
+            laser_pose=Pose2D(self.profile.lidar.mount_x, self.profile.lidar.mount_y, self.profile.lidar.mount_yaw),
+            trail=np.asarray(self._trail) if self._trail else None,
+            grid=self.grid,
+            grid_version=self.grid_version,
+            health=self.health(now),
+            estop=self.estop_latched,
+            fault=self.fault,
+            extras={"footprint": self.profile.footprint_polygon()},
+        )
+        self.bus.publish(snap)
+
+    # ------------------------------------------------------------------ state helpers
+    def health(self, now: float | None = None) -> dict:
+        now = self.clock.now() if now is None else now
+        batt = self.battery_v
+        pct = None
+        if batt is not None:
+            full, empty = self.profile.battery_full_v, self.profile.battery_empty_v
+            pct = float(np.clip((batt - empty) / (full - empty) * 100.0, 0.0, 100.0))
+        return {
+            "link": self.link_state.value,
+            "link_reason": self.link_reason,
+            "battery_v": batt,
+            "battery_pct": pct,
+            "scan_age_s": None if not math.isfinite(self.last_scan_time) else round(now - self.last_scan_time, 3),
+            "loop": self.stats.summary(),
+            "collisions": self.collisions,
+            "fault": self.fault,
+        }
+
+    def set_grid(self, grid: OccupancyGrid | None) -> None:
+        self.grid = grid
+        self.grid_version += 1
+
+    def add_event(self, type_: str, **payload) -> None:
+        ev = {"t": round(self.clock.now() - self.started_at, 3), "type": type_, **payload}
+        self.events.append(ev)
+        for listener in list(self.event_listeners):
+            try:
+                listener(ev)
+            except Exception:
+                log.exception("event listener failed")
+
+    def _enter_fault(self, reason: str) -> None:
+        with self._lock:
+            self.fault = reason
+            self._teleop = TeleopState()
+        self.modes.enter(Mode.FAULT, reason)
+
+    def _fault_still_present(self) -> str | None:
+        if self.link_state == LinkState.LOST:
+            return f"link still lost: {self.link_reason or 'no telemetry'}"
+        now = self.clock.now()
+        if now - self.last_scan_time > self.options.lidar_timeout:
+            return "lidar still silent"
+        return None
+
+    def _on_mode_change(self, old: Mode, new: Mode, reason: str) -> None:
+        self.add_event("mode", **{"from": old.value, "to": new.value, "reason": reason})
+        if new in (Mode.ESTOP,):
+            self.add_event("estop", reason=reason)
+        if new == Mode.FAULT:
+            self.add_event("fault", reason=reason)

@@ -1,0 +1,131 @@
+"""Teleop and telemetry websockets end to end against the served app (real clock, simulated robot)."""
+
+from __future__ import annotations
+
+import json
+import math
+import time
+
+import pytest
+from websockets.exceptions import ConnectionClosed
+from websockets.sync.client import connect
+
+
+def twist(vx: float = 0.0, wz: float = 0.0, vy: float = 0.0) -> str:
+    return json.dumps({"linear": {"x": vx, "y": vy, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
+
+
+def drive(ws, seconds: float, **kw) -> None:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        ws.send(twist(**kw))
+        time.sleep(0.1)
+
+
+def hello(ws) -> dict:
+    msg = json.loads(ws.recv(timeout=5))
+    assert msg["type"] == "hello"
+    return msg
+
+
+def test_drive_forward_then_deadman_stops(live_server) -> None:
+    session = live_server.runtime.session
+    start = session.pose
+    with connect(f"{live_server.ws_url}/ws/teleop") as ws:
+        assert hello(ws)["driving"] is True
+        drive(ws, 1.0, vx=0.2)
+        moved_while_driving = session.pose.distance_to(start)
+        assert session.modes.mode.value == "teleop"
+        time.sleep(0.8)  # > deadman 0.5 s without commands
+        assert abs(session.last_command.vx) < 1e-9
+        assert abs(session.velocity.vx) < 0.02
+        travelled = session.pose.distance_to(start)
+    assert 0.12 < moved_while_driving < 0.26, moved_while_driving
+    assert travelled < 0.3
+
+
+def test_malformed_message_errors_and_stops_but_keeps_connection(live_server) -> None:
+    session = live_server.runtime.session
+    with connect(f"{live_server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        drive(ws, 0.4, vx=0.2)
+        ws.send(json.dumps({"linear": {"x": "fast"}}))
+        err = json.loads(ws.recv(timeout=5))
+        assert err["type"] == "error" and "linear.x" in err["error"]
+        time.sleep(0.3)
+        assert abs(session.last_command.vx) < 1e-9
+        ws.send(json.dumps({"linear": {"x": float("nan")}}).replace("NaN", "NaN"))
+        err = json.loads(ws.recv(timeout=5))
+        assert err["type"] == "error"
+        ws.send(twist(vx=0.1))  # still usable
+        ws.send(json.dumps([1, 2, 3]))
+        assert json.loads(ws.recv(timeout=5))["type"] == "error"
+
+
+@pytest.mark.parametrize("frame", ["not json at all", b"\x00\x01binary"])
+def test_non_json_frame_closes_with_1003(live_server, frame) -> None:
+    with connect(f"{live_server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        ws.send(frame)
+        with pytest.raises(ConnectionClosed) as info:
+            ws.recv(timeout=5)
+        assert info.value.rcvd is not None and info.value.rcvd.code == 1003
+    assert abs(live_server.runtime.session.last_command.vx) < 1e-9
+
+
+def test_one_driver_at_a_time_and_disconnect_stops(live_server) -> None:
+    rt = live_server.runtime
+    with connect(f"{live_server.ws_url}/ws/teleop") as first:
+        assert hello(first)["driving"] is True
+        with connect(f"{live_server.ws_url}/ws/teleop") as second:
+            assert hello(second)["driving"] is False
+            second.send(twist(vx=0.2))
+            err = json.loads(second.recv(timeout=5))
+            assert err["type"] == "error" and "another client" in err["error"]
+        first.send(twist(vx=0.2))
+        time.sleep(0.3)
+        assert rt.session.last_command.vx > 0
+    time.sleep(0.3)
+    assert rt.lease.holder is None
+    assert abs(rt.session.last_command.vx) < 1e-9
+
+
+def test_clamp_reported_in_telemetry_and_rate(live_server) -> None:
+    limits = live_server.runtime.profile.limits
+    with connect(f"{live_server.ws_url}/ws/teleop") as ws, \
+            connect(f"{live_server.ws_url}/ws/telemetry?hz=15") as tel:
+        hello(ws)
+        drive(ws, 0.6, vx=5.0)
+        ws.send(twist(vx=5.0))
+        msgs = []
+        t0 = time.monotonic()
+        while time.monotonic() - t0 < 1.0:
+            msgs.append(json.loads(tel.recv(timeout=5)))
+        ws.send(twist(vx=5.0))
+        assert len(msgs) >= 9, len(msgs)
+        clamped = [m for m in msgs if "linear.x" in m["clamped"]]
+        assert clamped, "clamp never reported"
+        assert max(m["command"]["linear"]["x"] for m in msgs) <= limits.max_vel_x + 1e-9
+        last = msgs[-1]
+        assert last["scan"] is not None and len(last["scan"]["ranges"]) <= 180
+        assert all(r is None or math.isfinite(r) for r in last["scan"]["ranges"])
+        assert {"mode", "pose", "velocity", "health"} <= set(last)
+
+
+def test_estop_stops_robot_during_teleop(live_server) -> None:
+    import httpx
+
+    session = live_server.runtime.session
+    with connect(f"{live_server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        drive(ws, 0.5, vx=0.2)
+        assert session.last_command.vx > 0.1
+        r = httpx.post(f"{live_server.url}/api/robot/estop")
+        assert r.json()["mode"] == "estop"
+        time.sleep(0.15)  # at most a few control periods
+        assert session.last_command.vx == 0.0
+        ws.send(twist(vx=0.2))
+        err = json.loads(ws.recv(timeout=5))
+        assert err["type"] == "error" and "estop" in err["error"]
+        time.sleep(0.2)
+        assert session.last_command.vx == 0.0
