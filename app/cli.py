@@ -44,4 +44,7 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    # Re-import so commands and this entry point share one ``CliError`` class.
+    from app.cli import main as _main
+
+    sys.exit(_main())

@@ -33,14 +33,24 @@ class Runtime:
     @classmethod
     def build(cls, settings: Settings, clock: Clock | None = None) -> Runtime:
         profile = load_profile(settings.profile)
-        engine = make_engine(settings.db_url)
-        migrate(engine)
-        maps = MapStore(engine)
-        _register_stock_maps(maps)
         clock = clock or RealClock()
         bundle = make_driver(settings.robot, profile, settings.world, clock, settings.seed)
-        session = Session(bundle.driver, clock=clock, grid=bundle.grid, start_pose=bundle.start_pose,
-                          options=SessionOptions(rate_hz=settings.rate_hz), robot_name=settings.robot_name)
+        try:
+            engine = make_engine(settings.db_url)
+            migrate(engine)
+            maps = MapStore(engine)
+            _register_stock_maps(maps)
+        except Exception:
+            bundle.driver.close()
+            raise
+        session = Session(
+            bundle.driver,
+            clock=clock,
+            grid=bundle.grid,
+            start_pose=bundle.start_pose,
+            options=SessionOptions(rate_hz=settings.rate_hz),
+            robot_name=settings.robot_name,
+        )
         return cls(settings, profile, engine, maps, session, world_name=bundle.world_name)
 
     def start(self) -> None:

@@ -14,7 +14,9 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -27,6 +29,23 @@ from robot.clock import Clock, RealClock
 from robot.odometry import WheelOdometry
 
 log = logging.getLogger("navdeck.session")
+
+
+class Stage(Protocol):
+    """A pipeline stage run by the control loop (SLAM, localization, costmaps, navigation...).
+
+    ``tick`` must be quick: heavy work goes to ``session.workers`` and comes back on a later tick.
+    ``snapshot_fields`` returns Snapshot fields to publish (``path``, ``goal``, ``particles``,
+    ``behavior``, ``local_plan``, and an ``extras`` dict merged into the snapshot's extras)."""
+
+    def tick(self, session: Session, frame: SensorFrame, now: float) -> None: ...
+
+    def snapshot_fields(self, session: Session) -> dict[str, Any] | None: ...
+
+    def close(self) -> None: ...
+
+
+CommandSource = Callable[[float], "Twist2D | None"]
 
 
 @dataclass(frozen=True)
@@ -76,13 +95,15 @@ class Session:
         *,
         clock: Clock | None = None,
         grid: OccupancyGrid | None = None,
-        start_pose: Pose2D = Pose2D(),
-        options: SessionOptions = SessionOptions(),
+        start_pose: Pose2D | None = None,
+        options: SessionOptions | None = None,
         robot_name: str = "navdeck",
     ) -> None:
         self.driver = driver
         self.profile = driver.profile
         self.clock: Clock = clock or RealClock()
+        options = options or SessionOptions()
+        start_pose = start_pose or Pose2D()
         self.options = options
         self.robot_name = robot_name
         self.period = 1.0 / options.rate_hz
@@ -116,7 +137,9 @@ class Session:
         self._seq = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
-        self._tick_hooks: list[Callable[[Session, SensorFrame], None]] = []
+        self.stages: list[Stage] = []
+        self.command_sources: dict[Mode, CommandSource] = {}
+        self.workers = ThreadPoolExecutor(max_workers=2, thread_name_prefix="worker")
         self._reset_driver = False
         self.started_at = self.clock.now()
 
@@ -152,9 +175,13 @@ class Session:
         self._reset_driver = True
         return mode
 
-    def add_tick_hook(self, hook: Callable[[Session, SensorFrame], None]) -> None:
-        """Run ``hook(session, frame)`` after odometry each tick (pipeline stages plug in here)."""
-        self._tick_hooks.append(hook)
+    def add_stage(self, stage: Stage) -> None:
+        """Add a pipeline stage: ``tick`` runs after odometry each control period (in order added)."""
+        self.stages.append(stage)
+
+    def set_command_source(self, mode: Mode, source: CommandSource) -> None:
+        """Who drives in ``mode``: ``source(now)`` returns a Twist2D, or None to stop at once."""
+        self.command_sources[mode] = source
 
     # ------------------------------------------------------------------ loop
     def start(self) -> None:
@@ -169,6 +196,12 @@ class Session:
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
+        for stage in self.stages:
+            try:
+                stage.close()
+            except Exception:
+                log.exception("stage close failed")
+        self.workers.shutdown(wait=False, cancel_futures=True)
         try:
             self.driver.stop()
         finally:
@@ -206,8 +239,8 @@ class Session:
         self.stats.ticks += 1
         frame = self.driver.read()
         self._ingest(frame, now)
-        for hook in self._tick_hooks:
-            hook(self, frame)
+        for stage in self.stages:
+            stage.tick(self, frame, now)
         cmd = self._choose_command(now)
         self._send(cmd)
         self._publish(now)
@@ -220,9 +253,11 @@ class Session:
             self.odom_pose, self.velocity, self.wheel_slip = odo.pose, odo.twist, odo.slipping
             self.distance_travelled += prev.distance_to(self.odom_pose)
         self.pose = self.map_to_odom.compose(self.odom_pose)
-        if not self._trail or math.hypot(
-            self.pose.x - self._trail[-1][0], self.pose.y - self._trail[-1][1]
-        ) >= self.options.trail_min_step:
+        if (
+            not self._trail
+            or math.hypot(self.pose.x - self._trail[-1][0], self.pose.y - self._trail[-1][1])
+            >= self.options.trail_min_step
+        ):
             self._trail.append((self.pose.x, self.pose.y))
         if frame.scan is not None:
             self.last_scan = frame.scan
@@ -233,13 +268,7 @@ class Session:
             self.collisions += 1
             self.add_event("collision", pose=[self.pose.x, self.pose.y, self.pose.theta])
         self.link_state, self.link_reason = frame.link.state, frame.link.reason
-        fault = frame.fault
-        if fault is None and frame.link.state == LinkState.LOST:
-            fault = f"link lost: {frame.link.reason or 'no telemetry'}"
-        if fault is None and now - self.last_scan_time > self.options.lidar_timeout and now - self.started_at > (
-            self.options.lidar_timeout
-        ):
-            fault = f"lidar: no scan for {now - self.last_scan_time:.1f} s"
+        fault = frame.fault or self._fault_condition(now)
         if fault is not None and self.fault is None:
             self._enter_fault(fault)
 
@@ -254,6 +283,9 @@ class Session:
             if now - tele.stamp > self.options.deadman_timeout:
                 return ZERO_TWIST
             return tele.command
+        source = self.command_sources.get(mode)
+        if source is not None:
+            return source(now)
         return ZERO_TWIST
 
     def _send(self, cmd: Twist2D | None) -> None:
@@ -279,6 +311,14 @@ class Session:
 
     def _publish(self, now: float) -> None:
         self._seq += 1
+        fields: dict = {"extras": {"footprint": self.profile.footprint_polygon()}}
+        for stage in self.stages:
+            extra = stage.snapshot_fields(self)
+            if extra:
+                extras = extra.pop("extras", None)
+                fields.update(extra)
+                if extras:
+                    fields["extras"].update(extras)
         snap = Snapshot(
             stamp=now,
             seq=self._seq,
@@ -289,14 +329,16 @@ class Session:
             command=self.last_command,
             clamped=self.last_clamped,
             scan=self.last_scan,
-            laser_pose=Pose2D(self.profile.lidar.mount_x, self.profile.lidar.mount_y, self.profile.lidar.mount_yaw),
+            laser_pose=Pose2D(
+                self.profile.lidar.mount_x, self.profile.lidar.mount_y, self.profile.lidar.mount_yaw
+            ),
             trail=np.asarray(self._trail) if self._trail else None,
             grid=self.grid,
             grid_version=self.grid_version,
             health=self.health(now),
             estop=self.estop_latched,
             fault=self.fault,
-            extras={"footprint": self.profile.footprint_polygon()},
+            **fields,
         )
         self.bus.publish(snap)
 
@@ -313,7 +355,9 @@ class Session:
             "link_reason": self.link_reason,
             "battery_v": batt,
             "battery_pct": pct,
-            "scan_age_s": None if not math.isfinite(self.last_scan_time) else round(now - self.last_scan_time, 3),
+            "scan_age_s": None
+            if not math.isfinite(self.last_scan_time)
+            else round(now - self.last_scan_time, 3),
             "loop": self.stats.summary(),
             "collisions": self.collisions,
             "fault": self.fault,
@@ -338,13 +382,17 @@ class Session:
             self._teleop = TeleopState()
         self.modes.enter(Mode.FAULT, reason)
 
-    def _fault_still_present(self) -> str | None:
+    def _fault_condition(self, now: float) -> str | None:
+        """A fault that holds right now (link lost, lidar silent), or None."""
         if self.link_state == LinkState.LOST:
-            return f"link still lost: {self.link_reason or 'no telemetry'}"
-        now = self.clock.now()
-        if now - self.last_scan_time > self.options.lidar_timeout:
-            return "lidar still silent"
+            return f"link lost: {self.link_reason or 'no telemetry'}"
+        silent = now - max(self.last_scan_time, self.started_at)
+        if silent > self.options.lidar_timeout:
+            return f"lidar: no scan for {silent:.1f} s"
         return None
+
+    def _fault_still_present(self) -> str | None:
+        return self._fault_condition(self.clock.now())
 
     def _on_mode_change(self, old: Mode, new: Mode, reason: str) -> None:
         self.add_event("mode", **{"from": old.value, "to": new.value, "reason": reason})

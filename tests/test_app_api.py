@@ -62,10 +62,17 @@ def test_stock_maps_registered_with_thumbnails(client) -> None:
 
 def test_openapi_and_dashboard(client) -> None:
     spec = client.get("/openapi.json").json()
-    for path in ("/api/health", "/api/robot", "/api/robot/mode", "/api/robot/estop", "/api/robot/reset",
-                 "/api/maps", "/api/maps/{map_id}"):
+    for path in (
+        "/api/health",
+        "/api/robot",
+        "/api/robot/mode",
+        "/api/robot/estop",
+        "/api/robot/reset",
+        "/api/maps",
+        "/api/maps/{map_id}",
+    ):
         assert path in spec["paths"]
     assert client.get("/docs").status_code == 200
     page = client.get("/")
     assert page.status_code == 200 and "E-STOP" in page.text
-    assert client.get("/app.js").status_code == 200
+    assert client.get("/js/main.js").status_code == 200

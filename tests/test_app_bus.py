@@ -9,8 +9,15 @@ from nav.types import Pose2D, Twist2D
 
 
 def snap(i: int) -> Snapshot:
-    return Snapshot(stamp=float(i), seq=i, mode="idle", pose=Pose2D(), odom_pose=Pose2D(), velocity=Twist2D(),
-                    command=Twist2D())
+    return Snapshot(
+        stamp=float(i),
+        seq=i,
+        mode="idle",
+        pose=Pose2D(),
+        odom_pose=Pose2D(),
+        velocity=Twist2D(),
+        command=Twist2D(),
+    )
 
 
 def test_slow_subscriber_gets_only_latest() -> None:

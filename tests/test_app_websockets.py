@@ -92,8 +92,10 @@ def test_one_driver_at_a_time_and_disconnect_stops(live_server) -> None:
 
 def test_clamp_reported_in_telemetry_and_rate(live_server) -> None:
     limits = live_server.runtime.profile.limits
-    with connect(f"{live_server.ws_url}/ws/teleop") as ws, \
-            connect(f"{live_server.ws_url}/ws/telemetry?hz=15") as tel:
+    with (
+        connect(f"{live_server.ws_url}/ws/teleop") as ws,
+        connect(f"{live_server.ws_url}/ws/telemetry?hz=15") as tel,
+    ):
         hello(ws)
         drive(ws, 0.6, vx=5.0)
         ws.send(twist(vx=5.0))

@@ -32,8 +32,17 @@ def run(args: argparse.Namespace) -> int:
     from robot.profiles import ProfileError
 
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(levelname)s %(name)s: %(message)s")
-    settings = Settings(robot=args.robot, profile=args.profile, world=args.world, host=args.host,
-                        port=args.port, db_url=args.db, seed=args.seed, viewer=not args.no_viewer)
+    logging.getLogger("alembic").setLevel(logging.WARNING)
+    settings = Settings(
+        robot=args.robot,
+        profile=args.profile,
+        world=args.world,
+        host=args.host,
+        port=args.port,
+        db_url=args.db,
+        seed=args.seed,
+        viewer=not args.no_viewer,
+    )
     try:
         runtime = Runtime.build(settings)
     except (ProfileError, DriverConfigError) as exc:
@@ -41,11 +50,16 @@ def run(args: argparse.Namespace) -> int:
     except Exception as exc:  # database URL problems and the like: one line, not a traceback
         raise CliError(f"cannot start: {type(exc).__name__}: {exc}") from None
     if not settings.is_local:
-        print(f"WARNING: listening on {settings.host}: anyone who can reach this address can drive the robot.",
-              file=sys.stderr)
+        print(
+            f"WARNING: listening on {settings.host}: anyone who can reach this address can drive the robot.",
+            file=sys.stderr,
+        )
     host = "127.0.0.1" if settings.host in ("0.0.0.0", "::") else settings.host
-    print(f"navdeck: dashboard at http://{host}:{settings.port}/  (robot {settings.robot}, profile "
-          f"{runtime.profile.name}, world {runtime.world_name}, database {settings.db_url})", flush=True)
+    print(
+        f"navdeck: dashboard at http://{host}:{settings.port}/  (robot {settings.robot}, profile "
+        f"{runtime.profile.name}, world {runtime.world_name}, database {settings.db_url})",
+        flush=True,
+    )
     app = create_app(runtime)
     uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning", ws_max_size=1 << 20)
     return 0

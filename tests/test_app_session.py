@@ -1,0 +1,88 @@
+"""The session's control loop on a virtual clock: deterministic, limits enforced, deadman and faults."""
+
+from __future__ import annotations
+
+import pytest
+
+from app.modes import Mode
+from app.session import Session
+from nav.types import Twist2D
+from robot.clock import VirtualClock
+from robot.profiles import load_profile
+from robot.sim import SimDriver, World
+
+
+def make_session(seed: int = 3, world: str = "apartment") -> Session:
+    clock = VirtualClock()
+    w = World.stock(world)
+    driver = SimDriver(w, load_profile("skid4"), clock, seed=seed, start_pose=w.start_pose)
+    return Session(driver, clock=clock, grid=w.grid, start_pose=w.start_pose)
+
+
+def drive(session: Session, cmd: Twist2D, seconds: float) -> None:
+    for _ in range(round(seconds / session.period)):
+        session.set_teleop(cmd, "test")
+        session.run_for(session.period)
+
+
+def test_same_seed_same_trajectory() -> None:
+    poses = []
+    for _ in range(2):
+        s = make_session(seed=11)
+        s.request_mode("teleop")
+        drive(s, Twist2D(0.2, 0.0, 0.3), 3.0)
+        poses.append(s.pose)
+    assert poses[0] == poses[1]
+
+
+def test_teleop_drives_and_deadman_stops() -> None:
+    s = make_session()
+    s.request_mode("teleop")
+    start = s.pose
+    drive(s, Twist2D(0.2, 0.0, 0.0), 1.0)
+    assert 0.15 < s.pose.distance_to(start) < 0.22
+    s.run_for(0.6)  # no commands: deadman
+    assert s.last_command.is_zero()
+    stopped_at = s.pose
+    s.run_for(1.0)
+    assert s.pose.distance_to(stopped_at) < 0.01
+
+
+def test_commands_beyond_limits_are_clamped() -> None:
+    s = make_session()
+    s.request_mode("teleop")
+    drive(s, Twist2D(3.0, 1.0, 9.0), 1.0)
+    lim = s.profile.limits
+    assert s.last_command.vx == pytest.approx(lim.max_vel_x)
+    assert s.last_command.vy == 0.0 and s.last_command.wz == pytest.approx(lim.max_vel_theta)
+    assert set(s.last_clamped) == {"linear.x", "linear.y", "angular.z"}
+
+
+def test_estop_stops_within_one_period_and_latches() -> None:
+    s = make_session()
+    s.request_mode("teleop")
+    drive(s, Twist2D(0.2, 0.0, 0.0), 1.0)
+    s.estop("test")
+    s.set_teleop(Twist2D(0.2, 0.0, 0.0), "test")
+    s.run_for(s.period)
+    assert s.modes.mode == Mode.ESTOP and s.last_command.is_zero() and s.driver.estopped
+    drive(s, Twist2D(0.2, 0.0, 0.0), 0.5)
+    assert s.last_command.is_zero()
+    s.reset()
+    s.run_for(s.period)  # the driver's latch is released at the next tick
+    assert s.modes.mode == Mode.IDLE and not s.driver.estopped
+
+
+def test_lidar_silence_faults_and_stops() -> None:
+    s = make_session()
+    s.request_mode("teleop")
+    drive(s, Twist2D(0.2, 0.0, 0.0), 0.5)
+    s.driver.lidar_enabled = False  # the simulated lidar stops publishing
+    drive(s, Twist2D(0.2, 0.0, 0.0), 2.0)
+    assert s.modes.mode == Mode.FAULT and "lidar" in (s.fault or "")
+    assert s.last_command.is_zero()
+    with pytest.raises(Exception, match="lidar"):
+        s.reset()
+    s.driver.lidar_enabled = True
+    s.run_for(0.5)
+    assert s.reset() == Mode.IDLE
