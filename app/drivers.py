@@ -61,4 +61,6 @@ def make_driver(robot: str, profile: RobotProfile, world: str, clock: Clock, see
         except SerialError as exc:
             raise DriverConfigError(str(exc)) from exc
         return DriverBundle(driver, None, Pose2D(), None)
-    raise DriverConfigError(f"unknown robot {robot!r}: use 'sim' or 'serial:///dev/ttyUSB0?lidar=/dev/ttyUSB1'")
+    raise DriverConfigError(
+        f"unknown robot {robot!r}: use 'sim' or 'serial:///dev/ttyUSB0?lidar=/dev/ttyUSB1'"
+    )

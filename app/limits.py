@@ -40,7 +40,12 @@ def _ramp(target: float, current: float, acc: float, decel: float, dt: float) ->
 def limit_acceleration(cmd: Twist2D, previous: Twist2D, limits: Limits, dt: float) -> Twist2D:
     return Twist2D(
         _ramp(cmd.vx, previous.vx, limits.acc_lim_x, limits.decel_lim_x, dt),
-        _ramp(cmd.vy, previous.vy, limits.acc_lim_y or limits.acc_lim_x, limits.decel_lim_y or limits.decel_lim_x,
-              dt),
+        _ramp(
+            cmd.vy,
+            previous.vy,
+            limits.acc_lim_y or limits.acc_lim_x,
+            limits.decel_lim_y or limits.decel_lim_x,
+            dt,
+        ),
         _ramp(cmd.wz, previous.wz, limits.acc_lim_theta, limits.decel_lim_theta, dt),
     )

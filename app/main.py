@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import contextlib
+import importlib
 import logging
+import pkgutil
 from pathlib import Path
 
 from fastapi import FastAPI, Request
@@ -11,11 +13,20 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
 from fastapi.staticfiles import StaticFiles
 
-from app.api.routes import health, maps, robot, ws
+import app.api.routes as routes_pkg
 from app.runtime import Runtime
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 log = logging.getLogger("navdeck")
+
+
+def _route_modules() -> list:
+    """Every module in app/api/routes with a ``router`` (one router per resource)."""
+    mods = [
+        importlib.import_module(f"{routes_pkg.__name__}.{m.name}")
+        for m in pkgutil.iter_modules(routes_pkg.__path__)
+    ]
+    return [m for m in mods if hasattr(m, "router")]
 
 
 def create_app(runtime: Runtime) -> FastAPI:
@@ -37,12 +48,14 @@ def create_app(runtime: Runtime) -> FastAPI:
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_req: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = [{"field": ".".join(str(p) for p in e["loc"][1:]) or "body", "message": e["msg"]}
-                  for e in exc.errors()]
+        errors = [
+            {"field": ".".join(str(p) for p in e["loc"][1:]) or "body", "message": e["msg"]}
+            for e in exc.errors()
+        ]
         summary = "; ".join(f"{e['field']}: {e['message']}" for e in errors)
         return JSONResponse(status_code=422, content={"detail": summary, "errors": errors})
 
-    for module in (health, robot, maps, ws):
+    for module in _route_modules():
         app.include_router(module.router)
 
     from app.viewer.relay import make_router

@@ -33,26 +33,46 @@ class MapInfo:
 
     def as_dict(self) -> dict:
         return {
-            "id": self.id, "name": self.name, "resolution": self.resolution, "width": self.width,
-            "height": self.height, "size_m": [round(self.width * self.resolution, 3),
-                                              round(self.height * self.resolution, 3)],
-            "origin": list(self.origin), "source": self.source, "is_stock": self.is_stock,
-            "robot_id": self.robot_id, "run_id": self.run_id,
-            "created_at": self.created_at.isoformat(), "updated_at": self.updated_at.isoformat(),
+            "id": self.id,
+            "name": self.name,
+            "resolution": self.resolution,
+            "width": self.width,
+            "height": self.height,
+            "size_m": [round(self.width * self.resolution, 3), round(self.height * self.resolution, 3)],
+            "origin": list(self.origin),
+            "source": self.source,
+            "is_stock": self.is_stock,
+            "robot_id": self.robot_id,
+            "run_id": self.run_id,
+            "created_at": self.created_at.isoformat(),
+            "updated_at": self.updated_at.isoformat(),
             "thumbnail_url": f"/api/maps/{self.id}/thumbnail.png",
         }
 
 
 def _info(rec: MapRecord) -> MapInfo:
     assert rec.id is not None
-    return MapInfo(rec.id, rec.name, rec.resolution, rec.width, rec.height,
-                   (rec.origin_x, rec.origin_y, rec.origin_yaw), rec.source, rec.is_stock, rec.robot_id,
-                   rec.run_id, rec.created_at, rec.updated_at)
+    return MapInfo(
+        rec.id,
+        rec.name,
+        rec.resolution,
+        rec.width,
+        rec.height,
+        (rec.origin_x, rec.origin_y, rec.origin_yaw),
+        rec.source,
+        rec.is_stock,
+        rec.robot_id,
+        rec.run_id,
+        rec.created_at,
+        rec.updated_at,
+    )
 
 
 def grid_of(rec: MapRecord) -> OccupancyGrid:
     data = np.frombuffer(zlib.decompress(rec.data), dtype=np.int8).reshape(rec.height, rec.width).copy()
-    geom = GridGeometry(rec.resolution, rec.width, rec.height, Pose2D(rec.origin_x, rec.origin_y, rec.origin_yaw))
+    geom = GridGeometry(
+        rec.resolution, rec.width, rec.height, Pose2D(rec.origin_x, rec.origin_y, rec.origin_yaw)
+    )
     return OccupancyGrid(geom, data)
 
 
@@ -60,15 +80,31 @@ class MapStore:
     def __init__(self, engine: Engine) -> None:
         self.engine = engine
 
-    def add(self, name: str, grid: OccupancyGrid, *, source: str = "import", is_stock: bool = False,
-            robot_id: int | None = None, run_id: int | None = None) -> MapInfo:
+    def add(
+        self,
+        name: str,
+        grid: OccupancyGrid,
+        *,
+        source: str = "import",
+        is_stock: bool = False,
+        robot_id: int | None = None,
+        run_id: int | None = None,
+    ) -> MapInfo:
         """Store a map in one transaction (all or nothing)."""
         g = grid.geometry
         rec = MapRecord(
-            name=name, resolution=g.resolution, origin_x=g.origin.x, origin_y=g.origin.y,
-            origin_yaw=g.origin.theta, width=g.width, height=g.height,
+            name=name,
+            resolution=g.resolution,
+            origin_x=g.origin.x,
+            origin_y=g.origin.y,
+            origin_yaw=g.origin.theta,
+            width=g.width,
+            height=g.height,
             data=zlib.compress(np.ascontiguousarray(grid.data, dtype=np.int8).tobytes(), 6),
-            thumbnail_png=thumbnail_png(grid), source=source, is_stock=is_stock, robot_id=robot_id,
+            thumbnail_png=thumbnail_png(grid),
+            source=source,
+            is_stock=is_stock,
+            robot_id=robot_id,
             run_id=run_id,
         )
         with Session(self.engine, expire_on_commit=False) as s:

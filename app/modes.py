@@ -28,8 +28,12 @@ class Mode(StrEnum):
 USER_REQUESTABLE = frozenset({Mode.IDLE, Mode.TELEOP, Mode.MAPPING, Mode.LOCALIZING, Mode.NAVIGATING})
 
 TRANSITIONS: dict[Mode, frozenset[Mode]] = {
-    Mode.IDLE: frozenset({Mode.TELEOP, Mode.MAPPING, Mode.LOCALIZING, Mode.NAVIGATING, Mode.ESTOP, Mode.FAULT}),
-    Mode.TELEOP: frozenset({Mode.IDLE, Mode.MAPPING, Mode.LOCALIZING, Mode.NAVIGATING, Mode.ESTOP, Mode.FAULT}),
+    Mode.IDLE: frozenset(
+        {Mode.TELEOP, Mode.MAPPING, Mode.LOCALIZING, Mode.NAVIGATING, Mode.ESTOP, Mode.FAULT}
+    ),
+    Mode.TELEOP: frozenset(
+        {Mode.IDLE, Mode.MAPPING, Mode.LOCALIZING, Mode.NAVIGATING, Mode.ESTOP, Mode.FAULT}
+    ),
     Mode.MAPPING: frozenset({Mode.IDLE, Mode.TELEOP, Mode.ESTOP, Mode.FAULT}),
     Mode.LOCALIZING: frozenset({Mode.IDLE, Mode.TELEOP, Mode.NAVIGATING, Mode.ESTOP, Mode.FAULT}),
     Mode.NAVIGATING: frozenset(
@@ -57,8 +61,12 @@ class TransitionRefused(Exception):
         return self.reason
 
     def as_dict(self) -> dict:
-        return {"detail": self.reason, "mode": self.current.value, "requested": self.requested,
-                "allowed": self.allowed}
+        return {
+            "detail": self.reason,
+            "mode": self.current.value,
+            "requested": self.requested,
+            "allowed": self.allowed,
+        }
 
 
 class ModeMachine:

@@ -29,6 +29,7 @@ class Runtime:
     lease: ControlLease = field(default_factory=ControlLease)
     viewer: object | None = None
     world_name: str | None = None
+    features: dict[str, object] = field(default_factory=dict)  # feature module name -> its handle
 
     @classmethod
     def build(cls, settings: Settings, clock: Clock | None = None) -> Runtime:
@@ -54,6 +55,10 @@ class Runtime:
         return cls(settings, profile, engine, maps, session, world_name=bundle.world_name)
 
     def start(self) -> None:
+        from app.features import discover
+
+        for module in discover():
+            self.features[module.__name__.rsplit(".", 1)[-1]] = module.setup(self)
         self.session.start()
         if self.settings.viewer:
             from app.viewer.scene import Viewer
@@ -66,6 +71,12 @@ class Runtime:
         """Clicks in the 3D view become session requests (wired up by the navigation features)."""
 
     def close(self) -> None:
+        for name, handle in reversed(list(self.features.items())):
+            if handle is not None and hasattr(handle, "close"):
+                try:
+                    handle.close()
+                except Exception:
+                    log.exception("feature %s close failed", name)
         if self.viewer is not None:
             try:
                 self.viewer.stop()

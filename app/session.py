@@ -46,6 +46,7 @@ class Stage(Protocol):
 
 
 CommandSource = Callable[[float], "Twist2D | None"]
+SafetyFilter = Callable[[Twist2D, SensorFrame], "tuple[Twist2D, str | None]"]
 
 
 @dataclass(frozen=True)
@@ -139,6 +140,10 @@ class Session:
         self._thread: threading.Thread | None = None
         self.stages: list[Stage] = []
         self.command_sources: dict[Mode, CommandSource] = {}
+        # Last word before the driver, below every planner: (command, frame) -> (command, reason or None).
+        self.safety: SafetyFilter | None = None
+        self._last_frame: SensorFrame | None = None
+        self.safety_stop: str | None = None
         self.workers = ThreadPoolExecutor(max_workers=2, thread_name_prefix="worker")
         self._reset_driver = False
         self.started_at = self.clock.now()
@@ -238,6 +243,7 @@ class Session:
         now = self.clock.now()
         self.stats.ticks += 1
         frame = self.driver.read()
+        self._last_frame = frame
         self._ingest(frame, now)
         for stage in self.stages:
             stage.tick(self, frame, now)
@@ -297,6 +303,9 @@ class Session:
             return
         limited, clamped = clamp_speed(cmd, self.profile.limits, self.profile.is_omni)
         limited = limit_acceleration(limited, self.last_command, self.profile.limits, self.period)
+        if self.safety is not None and self._last_frame is not None:
+            # after the ramp: a safety stop is immediate, never smoothed away
+            limited, self.safety_stop = self.safety(limited, self._last_frame)
         self.last_clamped = clamped
         self.last_command = limited
         self.driver.command(limited)

@@ -17,8 +17,10 @@ def pose_dict(p: Pose2D) -> dict[str, float]:
 
 def twist_dict(t: Twist2D) -> dict[str, Any]:
     """geometry_msgs/Twist shape."""
-    return {"linear": {"x": round(t.vx, 4), "y": round(t.vy, 4), "z": 0.0},
-            "angular": {"x": 0.0, "y": 0.0, "z": round(t.wz, 4)}}
+    return {
+        "linear": {"x": round(t.vx, 4), "y": round(t.vy, 4), "z": 0.0},
+        "angular": {"x": 0.0, "y": 0.0, "z": round(t.wz, 4)},
+    }
 
 
 def downsample_scan(snap: Snapshot, max_beams: int = 180) -> dict[str, Any] | None:
@@ -39,8 +41,9 @@ def downsample_scan(snap: Snapshot, max_beams: int = 180) -> dict[str, Any] | No
     }
 
 
-def snapshot_dict(snap: Snapshot, profile_name: str, *, include_scan: bool = True,
-                  allowed_modes: list[str] | None = None) -> dict[str, Any]:
+def snapshot_dict(
+    snap: Snapshot, profile_name: str, *, include_scan: bool = True, allowed_modes: list[str] | None = None
+) -> dict[str, Any]:
     out: dict[str, Any] = {
         "stamp": round(snap.stamp, 3),
         "seq": snap.seq,

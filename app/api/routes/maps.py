@@ -15,7 +15,9 @@ def list_maps(rt: RuntimeDep) -> list[dict]:
     return [m.as_dict() for m in rt.maps.list()]
 
 
-@router.get("/api/maps/{map_id}", summary="One map's metadata", responses={404: {"description": "no such map"}})
+@router.get(
+    "/api/maps/{map_id}", summary="One map's metadata", responses={404: {"description": "no such map"}}
+)
 def get_map(map_id: int, rt: RuntimeDep) -> dict:
     info = rt.maps.info(map_id)
     if info is None:
@@ -23,8 +25,11 @@ def get_map(map_id: int, rt: RuntimeDep) -> dict:
     return info.as_dict()
 
 
-@router.get("/api/maps/{map_id}/thumbnail.png", summary="A small PNG preview",
-            responses={404: {"description": "no such map"}, 200: {"content": {"image/png": {}}}})
+@router.get(
+    "/api/maps/{map_id}/thumbnail.png",
+    summary="A small PNG preview",
+    responses={404: {"description": "no such map"}, 200: {"content": {"image/png": {}}}},
+)
 def thumbnail(map_id: int, rt: RuntimeDep) -> Response:
     png = rt.maps.thumbnail(map_id)
     if png is None:

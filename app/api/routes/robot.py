@@ -50,8 +50,11 @@ def get_robot(rt: RuntimeDep) -> dict:
     return robot_state(rt)
 
 
-@router.post("/api/robot/mode", summary="Request a mode (409 with the allowed modes when refused)",
-             responses={409: {"description": "transition refused"}})
+@router.post(
+    "/api/robot/mode",
+    summary="Request a mode (409 with the allowed modes when refused)",
+    responses={409: {"description": "transition refused"}},
+)
 def set_mode(body: ModeRequest, rt: RuntimeDep):
     try:
         rt.session.request_mode(body.mode)
@@ -66,8 +69,11 @@ def estop(rt: RuntimeDep) -> dict:
     return robot_state(rt)
 
 
-@router.post("/api/robot/reset", summary="Release the e-stop or clear a fault",
-             responses={409: {"description": "nothing to reset, or the fault is still present"}})
+@router.post(
+    "/api/robot/reset",
+    summary="Release the e-stop or clear a fault",
+    responses={409: {"description": "nothing to reset, or the fault is still present"}},
+)
 def reset(rt: RuntimeDep):
     try:
         rt.session.reset()

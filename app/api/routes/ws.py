@@ -39,7 +39,11 @@ def parse_twist(msg: object) -> Twist2D:
     if not isinstance(linear, dict) or not isinstance(angular, dict):
         raise TeleopMessageError("linear and angular must be objects")
     values = []
-    for name, part, key in (("linear.x", linear, "x"), ("linear.y", linear, "y"), ("angular.z", angular, "z")):
+    for name, part, key in (
+        ("linear.x", linear, "x"),
+        ("linear.y", linear, "y"),
+        ("angular.z", angular, "z"),
+    ):
         v = part.get(key, 0.0)
         if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
             raise TeleopMessageError(f"{name} must be a finite number, got {v!r}")
@@ -60,8 +64,9 @@ async def teleop(ws: WebSocket) -> None:
     client_id = f"teleop-{uuid.uuid4().hex[:8]}"
     name = ws.query_params.get("name", client_id)[:64]
     have_lease = rt.lease.acquire(client_id, name)
-    await _send(ws, {"type": "hello", "client_id": client_id, "control": rt.lease.as_dict(),
-                     "driving": have_lease})
+    await _send(
+        ws, {"type": "hello", "client_id": client_id, "control": rt.lease.as_dict(), "driving": have_lease}
+    )
     try:
         while True:
             message = await ws.receive()
@@ -93,8 +98,9 @@ async def teleop(ws: WebSocket) -> None:
                 await _send(ws, {"type": "error", "error": str(exc)})
                 continue
             if not rt.lease.holds(client_id):
-                await _send(ws, {"type": "error", "error": "another client is driving",
-                                 "control": rt.lease.as_dict()})
+                await _send(
+                    ws, {"type": "error", "error": "another client is driving", "control": rt.lease.as_dict()}
+                )
                 continue
             mode = session.modes.mode
             if mode == Mode.IDLE and not cmd.is_zero():
@@ -102,8 +108,15 @@ async def teleop(ws: WebSocket) -> None:
                     session.request_mode(Mode.TELEOP)
                 mode = session.modes.mode
             if mode not in (Mode.TELEOP, Mode.MAPPING):
-                await _send(ws, {"type": "error", "error": f"teleop is not allowed in mode {mode.value}",
-                                 "mode": mode.value, "allowed": session.modes.allowed()})
+                await _send(
+                    ws,
+                    {
+                        "type": "error",
+                        "error": f"teleop is not allowed in mode {mode.value}",
+                        "mode": mode.value,
+                        "allowed": session.modes.allowed(),
+                    },
+                )
                 continue
             session.set_teleop(cmd, client_id)
     except WebSocketDisconnect:
@@ -147,8 +160,9 @@ async def telemetry(ws: WebSocket) -> None:
                 await asyncio.sleep(wait)
                 snap = sub.take() or snap
             last = time.monotonic()
-            payload = snapshot_dict(snap, rt.profile.name, include_scan=include_scan,
-                                    allowed_modes=rt.session.modes.allowed())
+            payload = snapshot_dict(
+                snap, rt.profile.name, include_scan=include_scan, allowed_modes=rt.session.modes.allowed()
+            )
             payload["control"] = rt.lease.as_dict()
             # a client that cannot take a frame within 2 s is dropped, never waited on by the loop
             await asyncio.wait_for(ws.send_text(json.dumps(payload)), timeout=2.0)
