@@ -1,0 +1,190 @@
+"""Rigid-body physics of the simulated base: acceleration-limited motors, wheel slip, encoders and a
+footprint that cannot pass through obstacles.
+
+Each fixed substep (``SimOptions.physics_rate_hz``) the motor twist moves toward the command within
+the profile's ``acc_lim_*`` / ``decel_lim_*``; the wheels turn by the inverse kinematics of that
+twist (what the encoders count); the body moves by the same twist perturbed by multiplicative slip
+noise (and, for skid steer, an effective track wider than the wheel track: skid-steer bases turn
+less than their encoders claim). The new pose is accepted only if every sample point of the
+footprint lies in a free cell; otherwise the body stays at the last free pose, the motors stall
+(velocity zero, wheels do not turn) and a collision is reported.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nav.types import Pose2D, Twist2D
+from robot.kinematics import integrate_twist
+from robot.profiles import RobotProfile
+from robot.sim.world import World, points_in_polygon
+
+
+@dataclass(frozen=True)
+class SimOptions:
+    """Options of the simulator (physics, sensor noise switches, battery)."""
+
+    physics_rate_hz: float = 100.0
+    """Hz; fixed physics substep rate. Default 100 (the base's 10 ms motor task in source A)."""
+    slip_noise_std: float = 0.02
+    """Relative std of the per-substep multiplicative noise on the body's v and w. Default 0.02."""
+    skid_track_factor: float = 1.0
+    """Effective / nominal track width for skid steer (> 1: turns less than the encoders claim).
+    Default 1.0 (no systematic scrub)."""
+    lidar_noise: bool = True
+    """Apply the profile's lidar range noise and dropouts. Default True."""
+    gyro_noise: bool = True
+    """Apply the profile's gyro bias and white noise. Default True."""
+    ir_rate_hz: float = 20.0
+    """Hz; how often the IR sensors are evaluated. Default 20."""
+    ir_stop: bool = True
+    """The base stops forward motion when an IR sensor triggers (source A's interrupt). Default True."""
+    battery_life_s: float = 3 * 3600.0
+    """Seconds from full to empty at full speed; half the drain rate when idle. Default 3 h."""
+    footprint_spacing: float = 0.02
+    """Metres between sample points on the footprint's edge for collision checks (finer than the
+    map so an edge sweeping into a cell is caught). Default 0.02."""
+    footprint_interior_spacing: float = 0.05
+    """Metres between interior sample points (no coarser than the map resolution, so a cell lying
+    wholly inside the footprint, e.g. after a teleport, is caught too). Default 0.05."""
+
+    def __post_init__(self) -> None:
+        positive = (
+            "physics_rate_hz",
+            "ir_rate_hz",
+            "battery_life_s",
+            "footprint_spacing",
+            "footprint_interior_spacing",
+            "skid_track_factor",
+        )
+        for name in positive:
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"SimOptions.{name} must be a positive number, got {value!r}")
+        if not (math.isfinite(self.slip_noise_std) and self.slip_noise_std >= 0):
+            raise ValueError(f"SimOptions.slip_noise_std must be >= 0, got {self.slip_noise_std!r}")
+
+
+def footprint_samples(
+    polygon: np.ndarray, spacing: float, interior_spacing: float | None = None
+) -> np.ndarray:
+    """Points covering a footprint polygon (its boundary and interior) in base_link, (N, 2)."""
+    poly = np.asarray(polygon, dtype=float)
+    q = np.roll(poly, -1, axis=0)
+    edges = []
+    for a, b in zip(poly, q, strict=True):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / spacing))
+        t = np.arange(n)[:, None] / n
+        edges.append(a + t * (b - a))
+    lo, hi = poly.min(axis=0), poly.max(axis=0)
+    step = interior_spacing or spacing
+    xs = np.arange(lo[0] + step / 2, hi[0], step)
+    ys = np.arange(lo[1] + step / 2, hi[1], step)
+    gx, gy = np.meshgrid(xs, ys)
+    grid = np.column_stack((gx.ravel(), gy.ravel()))
+    interior = grid[points_in_polygon(grid, poly)] if grid.size else np.zeros((0, 2))
+    return np.vstack([*edges, interior])
+
+
+class NormalStream:
+    """Standard normal samples drawn from a generator in blocks: one numpy call per 4096 samples
+    instead of one per physics substep, same determinism for a seed."""
+
+    def __init__(self, rng: np.random.Generator, block: int = 4096) -> None:
+        self.rng = rng
+        self.block = block
+        self._buf: list[float] = []
+        self._i = 0
+
+    def next(self) -> float:
+        if self._i >= len(self._buf):
+            self._buf = self.rng.standard_normal(self.block).tolist()
+            self._i = 0
+        self._i += 1
+        return self._buf[self._i - 1]
+
+
+def _approach(v: float, target: float, acc: float, dec: float, dt: float) -> float:
+    """Move ``v`` toward ``target``: ``acc`` when speeding up, ``dec`` when slowing or reversing."""
+    speeding_up = (v >= 0 and target > v) or (v <= 0 and target < v)
+    lim = (acc if speeding_up else dec) * dt
+    if lim <= 0:
+        return target
+    return v + max(-lim, min(lim, target - v))
+
+
+class SimBody:
+    """State and stepping of one simulated base."""
+
+    def __init__(
+        self, profile: RobotProfile, options: SimOptions, rng: np.random.Generator, pose: Pose2D
+    ) -> None:
+        self.profile = profile
+        self.options = options
+        self.rng = rng
+        self.noise = NormalStream(rng)
+        self.pose = pose
+        self.velocity = Twist2D()  # motor twist (body frame)
+        self.wheel_angle = np.zeros(profile.wheel_count)  # cumulative radians, profile order
+        self.samples = footprint_samples(
+            profile.footprint_polygon(32), options.footprint_spacing, options.footprint_interior_spacing
+        )
+        self._reach = float(np.max(np.hypot(self.samples[:, 0], self.samples[:, 1])))
+        self.last_accel = (0.0, 0.0)
+        self.true_yaw_rate = 0.0
+
+    def collides(self, world: World, pose: Pose2D) -> bool:
+        """Whether the footprint at ``pose`` overlaps an occupied cell (sampled every
+        ``footprint_spacing`` on the edge and ``footprint_interior_spacing`` inside)."""
+        if world.clearance_at(pose.x, pose.y) > self._reach:
+            return False  # open space: no obstacle within the footprint's circumscribed circle
+        return world.raycaster.any_occupied_at_pose(self.samples, pose.x, pose.y, pose.theta)
+
+    def step(self, world: World, target: Twist2D, dt: float) -> bool:
+        """Advance one substep toward ``target``; returns True on a collision."""
+        lim = self.profile.limits
+        v = self.velocity
+        omni = self.profile.is_omni
+        vx = _approach(v.vx, target.vx, lim.acc_lim_x, abs(lim.decel_lim_x), dt)
+        vy = (
+            _approach(v.vy, target.vy if omni else 0.0, lim.acc_lim_y, abs(lim.decel_lim_y), dt)
+            if omni
+            else 0.0
+        )
+        wz = _approach(v.wz, target.wz, lim.acc_lim_theta, abs(lim.decel_lim_theta), dt)
+        motor = Twist2D(vx, vy, wz)
+        std = self.options.slip_noise_std
+        if std > 0:
+            nx, ny, nw = std * self.noise.next(), std * self.noise.next(), std * self.noise.next()
+        else:
+            nx = ny = nw = 0.0
+        turn = 1.0 if omni else 1.0 / self.options.skid_track_factor
+        body = Twist2D(vx * (1 + nx), vy * (1 + ny), wz * turn * (1 + nw))
+        candidate = integrate_twist(self.pose, body, dt)
+        if self.collides(world, candidate):
+            self.velocity = Twist2D()
+            self.last_accel = (-v.vx / dt, -v.vy / dt)
+            self.true_yaw_rate = 0.0
+            return True
+        self.wheel_angle += self._rim_speeds(motor) * (dt / self.profile.wheel_radius)
+        self.last_accel = ((vx - v.vx) / dt, (vy - v.vy) / dt)
+        self.velocity = motor
+        self.pose = candidate
+        self.true_yaw_rate = body.wz
+        return False
+
+    def _rim_speeds(self, t: Twist2D) -> np.ndarray:
+        """Wheel rim speeds of the motor twist in profile order (scalar math: runs every substep)."""
+        p = self.profile
+        if p.is_omni:
+            r = p.omni_radius * t.wz
+            return np.array([t.vy + r, -t.vx + r, -t.vy + r, t.vx + r])
+        vl, vr = t.vx - t.wz * p.track_width / 2.0, t.vx + t.wz * p.track_width / 2.0
+        return np.array([vl, vl, vr, vr] if p.wheel_count == 4 else [vl, vr])
+
+    def ticks(self) -> np.ndarray:
+        """Cumulative encoder counts (int64), profile wheel order."""
+        return np.floor(self.wheel_angle / (2 * math.pi) * self.profile.ticks_per_rev).astype(np.int64)

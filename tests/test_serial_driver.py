@@ -1,0 +1,353 @@
+"""SerialDriver against the emulators over real pseudo-terminals (wall time, a few seconds)."""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Iterator
+
+import numpy as np
+import pytest
+import serial
+
+from nav.types import Pose2D, Twist2D
+from robot.base import Driver, LinkState, SensorFrame
+from robot.profiles import load_profile
+from robot.serial.driver import (
+    SerialDriver,
+    SerialOptions,
+    SerialUrlError,
+    _ClockSync,
+    _TickUnwrapper,
+    parse_serial_url,
+    wait_for,
+)
+from robot.serial.emulate import EmulatorPair
+from robot.serial.port import PortUnavailableError
+from robot.serial.protocol import (
+    MessageDecoder,
+    ParamId,
+    ParamSet,
+    ParamStatus,
+    Status,
+    Telemetry,
+    VelocityCommand,
+)
+from robot.serial.protocol import encode as encode_msg
+
+PROFILE = load_profile("skid4")
+
+
+@pytest.fixture
+def pair(tmp_path) -> Iterator[EmulatorPair]:
+    p = EmulatorPair(PROFILE, world="box", link_dir=tmp_path, seed=1)
+    p.start()
+    yield p
+    p.close()
+
+
+@pytest.fixture
+def driver(pair: EmulatorPair) -> Iterator[SerialDriver]:
+    """A driver with a lenient link timeout: on a loaded CI machine a starved thread must not trip
+    the watchdog in tests about something else. The 300 ms default is tested on its own."""
+    d = SerialDriver(SerialOptions(pair.base_path, pair.lidar_path, link_timeout=1.0), PROFILE)
+    yield d
+    d.close()
+
+
+@pytest.fixture
+def strict_driver(pair: EmulatorPair) -> Iterator[SerialDriver]:
+    """The default options: 300 ms link timeout."""
+    d = SerialDriver.from_url(pair.url(), PROFILE)
+    assert d.options.link_timeout == 0.3
+    yield d
+    d.close()
+
+
+def drive(d: SerialDriver, cmd: Twist2D, seconds: float, period: float = 0.05) -> list[SensorFrame]:
+    """Run a 20 Hz control loop for ``seconds`` and return its frames."""
+    frames = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        d.command(cmd)
+        frames.append(d.read())
+        time.sleep(period)
+    return frames
+
+
+def last_ticks(frames: list[SensorFrame]) -> np.ndarray:
+    return next(f.ticks.counts for f in reversed(frames) if f.ticks is not None)
+
+
+# ---------------------------------------------------------------------------------------- URL parsing
+def test_parse_url() -> None:
+    o = parse_serial_url("serial:///dev/ttyUSB0?lidar=/dev/ttyUSB1&baud=230400")
+    assert o == SerialOptions(port="/dev/ttyUSB0", lidar_port="/dev/ttyUSB1", baud=230400)
+    assert parse_serial_url("serial://ttyACM0").port == "/dev/ttyACM0"
+    assert parse_serial_url("serial:///dev/ttyUSB0?link_timeout=0.5").link_timeout == 0.5
+    for bad in (
+        "tcp://x",
+        "serial://",
+        "serial:///dev/x?bogus=1",
+        "serial:///dev/x?baud=fast",
+        "serial:///d?baud=-1",
+    ):
+        with pytest.raises(SerialUrlError):
+            parse_serial_url(bad)
+
+
+# ---------------------------------------------------------------------------------------- pure helpers
+def test_tick_unwrap_across_int32_wrap_and_reboot() -> None:
+    u = _TickUnwrapper(2)
+    u.update((2**31 - 10, -5), rebased=False)
+    got = u.update((-(2**31) + 5, -15), rebased=False)  # +15 through the wrap, -10
+    assert got.tolist() == [15, -10]
+    got = u.update((0, 0), rebased=True)  # MCU rebooted: no phantom motion
+    assert got.tolist() == [15, -10]
+    assert u.update((3, 1), rebased=False).tolist() == [18, -9]
+
+
+def test_clock_sync_takes_least_delayed_sample_and_unwraps() -> None:
+    s = _ClockSync()
+    assert s.stamp(1_000_000, 101.010) == pytest.approx(101.010)
+    assert s.stamp(1_020_000, 101.025) == pytest.approx(101.025)  # less delay: offset 100.005
+    assert s.stamp(1_040_000, 101.060) == pytest.approx(101.045)
+    wrap = s.stamp((1_060_000 + 2**32) & 0xFFFFFFFF, 101.070)
+    assert wrap == pytest.approx(101.065)
+
+
+# ---------------------------------------------------------------------------------------- start-up errors
+def test_missing_port_is_one_line_error(tmp_path) -> None:
+    with pytest.raises(PortUnavailableError) as exc:
+        SerialDriver(str(tmp_path / "ttyUSB9"), PROFILE)
+    assert "not found" in str(exc.value) and "\n" not in str(exc.value)
+
+
+def test_busy_port_is_one_line_error(pair: EmulatorPair, driver: SerialDriver) -> None:
+    with pytest.raises(PortUnavailableError) as exc:
+        SerialDriver(pair.base_path, PROFILE)
+    assert "busy" in str(exc.value)
+
+
+# ---------------------------------------------------------------------------------------- behaviour
+def test_implements_driver_protocol(driver: SerialDriver) -> None:
+    assert isinstance(driver, Driver)
+
+
+def test_drives_ticks_advance_scans_arrive(pair: EmulatorPair, driver: SerialDriver) -> None:
+    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 1.2)
+    assert all(f.link.state is LinkState.OK for f in frames[3:])  # link_timeout 1 s in this fixture
+    counts = last_ticks(frames)
+    # 0.2 m/s for ~1 s on 65 mm wheels at 1320 ticks/rev: ~1100 ticks (minus the acceleration ramp)
+    assert np.all(counts > 700), counts
+    assert np.all(np.abs(counts - counts.mean()) < 0.05 * counts.mean())  # straight: wheels agree
+    assert pair.pump.truth_pose.x > pair.pump.sim.world.start_pose.x + 0.12
+    scans = [f.scan for f in frames if f.scan is not None]
+    assert len(scans) >= 3  # 5.5 Hz
+    s = scans[-1]
+    assert s.ranges.shape == (PROFILE.lidar.beams,)
+    # in the 6 x 4 m box the robot sees walls all round: most beams measured and finite
+    assert np.isfinite(s.ranges).mean() > 0.7
+    imu = [f.imu.gyro_z for f in frames if f.imu is not None]
+    assert abs(np.mean(imu)) < 0.05
+    assert frames[-1].battery_v == pytest.approx(PROFILE.battery_full_v, abs=0.2)
+
+
+def test_turn_gyro_and_scan_rotate_consistently(pair: EmulatorPair, driver: SerialDriver) -> None:
+    frames = drive(driver, Twist2D(0.0, 0.0, 0.8), 1.0)
+    gyro = [f.imu.gyro_z for f in frames[-8:] if f.imu is not None]
+    assert np.median(gyro) == pytest.approx(0.8, abs=0.1)
+    counts = last_ticks(frames)
+    assert counts[0] < 0 < counts[2]  # left wheels back, right wheels forward (CCW)
+
+
+def test_lidar_scan_matches_world(pair: EmulatorPair, driver: SerialDriver) -> None:
+    """The A1's clockwise nodes come back as a CCW scan matching the simulator's own ray cast."""
+    frames = drive(driver, Twist2D(), 0.8)
+    scan = next(f.scan for f in reversed(frames) if f.scan is not None)
+    truth = pair.pump.sim.lidar.true_ranges(pair.pump.sim.world, pair.pump.truth_pose)
+    ok = np.isfinite(scan.ranges) & np.isfinite(truth)
+    assert ok.mean() > 0.7
+    assert np.median(np.abs(scan.ranges[ok] - truth[ok])) < 0.05
+    # left (+90 deg) and right (-90 deg) walls of the box: 2 m each side of the start
+    left = scan.ranges[round((math.pi / 2 - scan.angle_min) / scan.angle_increment)]
+    assert left == pytest.approx(1.9, abs=0.1)
+
+
+def test_estop_latches_until_reset(pair: EmulatorPair, driver: SerialDriver) -> None:
+    drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6)
+    driver.estop()
+    time.sleep(0.1)
+    before = last_ticks(drive(driver, Twist2D(0.2, 0.0, 0.0), 0.2))
+    after = last_ticks(drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6))
+    assert np.all(np.abs(after - before) <= 2), (before, after)
+    assert driver.telemetry is not None and driver.telemetry.status & Status.ESTOP_LATCHED
+    driver.reset()
+    time.sleep(0.1)
+    moved = last_ticks(drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6))
+    assert np.all(moved - after > 200)
+
+
+def test_unplug_lost_within_300ms_then_recovers(pair: EmulatorPair, strict_driver: SerialDriver) -> None:
+    driver = strict_driver
+    drive(driver, Twist2D(0.15, 0.0, 0.0), 0.4)
+    sent_before = pair.base.last_command
+    assert sent_before is not None and sent_before.vx == pytest.approx(0.15)
+    pair.base.unplug()
+    t0 = time.monotonic()
+    assert wait_for(lambda: driver.read().link.state is LinkState.LOST, timeout=1.0, period=0.005)
+    lost_after = time.monotonic() - t0
+    assert lost_after < 0.45, lost_after  # 300 ms watchdog + scheduling slack
+    frame = driver.read()
+    assert frame.link.state is LinkState.LOST and frame.link.reason
+    assert frame.fault is not None
+    refused = driver.refused_commands
+    drive(driver, Twist2D(0.15, 0.0, 0.0), 0.3)
+    assert driver.refused_commands > refused  # the driver commands nothing while LOST
+    pair.base.last_command = None
+    pair.base.replug()
+    assert wait_for(lambda: driver.read().link.state is LinkState.OK, timeout=4.0)
+    # After recovery the held command was zeroed: the base got no motion until a new command.
+    time.sleep(0.2)
+    assert pair.base.last_command is None or pair.base.last_command.vx == 0.0
+    before = last_ticks(drive(driver, Twist2D(0.15, 0.0, 0.0), 0.1))
+    after = last_ticks(drive(driver, Twist2D(0.15, 0.0, 0.0), 0.6))
+    assert np.all(after - before > 150)
+
+
+def test_stall_is_lost_and_recovers_without_reconnect(
+    pair: EmulatorPair, strict_driver: SerialDriver
+) -> None:
+    driver = strict_driver
+    drive(driver, Twist2D(0.1, 0.0, 0.0), 0.3)
+    pair.base.faults.stall = True  # the base still listens but sends nothing
+    t0 = time.monotonic()
+    assert wait_for(lambda: driver.read().link.state is LinkState.LOST, timeout=1.0, period=0.005)
+    assert 0.25 < time.monotonic() - t0 < 0.8  # the 300 ms watchdog, not earlier
+    time.sleep(0.05)
+    assert pair.base.last_command is not None and pair.base.last_command.vx == 0.0  # stop sent
+    pair.base.last_command = None
+    drive(driver, Twist2D(0.1, 0.0, 0.0), 0.3)
+    assert pair.base.last_command is None  # while LOST the driver sends no velocity at all
+    assert "no telemetry" in driver.read().link.reason
+    pair.base.faults.stall = False
+    assert wait_for(lambda: driver.read().link.state is LinkState.OK, timeout=1.0)
+
+
+def test_firmware_watchdog_stops_motors(pair: EmulatorPair) -> None:
+    """A host that sends one command and dies: the base stops 200 ms later on its own."""
+    ser = serial.Serial(pair.base_path, 115200, timeout=0.05)
+    try:
+        ser.write(encode_msg(VelocityCommand(0.2, 0.0, 0.0), 0))
+        time.sleep(0.1)
+        assert pair.pump.sim._cmd.vx > 0
+        assert wait_for(lambda: pair.base.watchdog_fired, timeout=0.5)
+        assert pair.pump.sim._cmd.is_zero()
+        dec = MessageDecoder()
+        time.sleep(0.1)
+        msgs = dec.feed(ser.read(4096))
+        telem = [m for m in msgs if isinstance(m, Telemetry)]
+        assert telem and telem[-1].status & Status.WATCHDOG_STOP
+    finally:
+        ser.close()
+
+
+def test_keepalive_holds_command_between_slow_ticks(pair: EmulatorPair, driver: SerialDriver) -> None:
+    """A 5 Hz control loop (slower than the 200 ms firmware watchdog) still drives smoothly."""
+    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 1.0, period=0.2)
+    assert not pair.base.watchdog_fired
+    assert np.all(last_ticks(frames) > 700)
+
+
+def test_dead_control_loop_lets_the_base_stop(pair: EmulatorPair, driver: SerialDriver) -> None:
+    driver.command(Twist2D(0.2, 0.0, 0.0))
+    time.sleep(0.3)
+    assert pair.pump.sim._cmd.vx > 0
+    # no more command() calls: keep-alive ends after command_hold (0.5 s), the firmware 0.2 s later
+    assert wait_for(lambda: pair.base.watchdog_fired, timeout=1.5)
+    assert driver.read().link.state is LinkState.OK  # heartbeats keep the link itself alive
+
+
+def test_obstacle_stop_reported(tmp_path) -> None:
+    start = Pose2D(5.6, 2.0, 0.0)  # front IR sensors 0.18 m from the east wall of the box
+    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path, start_pose=start, lidar=False) as pair:
+        d = SerialDriver(pair.base_path, PROFILE)
+        try:
+            frames = drive(d, Twist2D(0.2, 0.0, 0.0), 0.6)
+            assert frames[-1].base_stopped_by_obstacle
+            assert frames[-1].ir is not None and frames[-1].ir.triggered.all()
+            assert np.all(np.abs(last_ticks(frames)) < 30)
+            # reversing away is allowed: the interrupt only blocks forward motion
+            back = drive(d, Twist2D(-0.1, 0.0, 0.0), 0.5)
+            assert np.all(last_ticks(back) < -50)
+        finally:
+            d.close()
+
+
+def test_parameters_get_set(pair: EmulatorPair, driver: SerialDriver) -> None:
+    base = driver._base
+    base.send(ParamSet(ParamId.WHEEL_RADIUS, 0.0350))
+    base.send(ParamSet(ParamId.CMD_TIMEOUT, 99.0))
+    base.send(ParamSet(200, 1.0))
+    assert wait_for(lambda: len(base.params) >= 3, timeout=1.0)
+    assert base.params[ParamId.WHEEL_RADIUS].value == pytest.approx(0.035)
+    assert base.params[ParamId.CMD_TIMEOUT].status == ParamStatus.OUT_OF_RANGE
+    assert base.params[200].status == ParamStatus.UNKNOWN_ID
+    assert pair.base.params[ParamId.WHEEL_RADIUS] == pytest.approx(0.035)
+
+
+def test_noisy_line_counts_bad_frames_and_keeps_driving(pair: EmulatorPair, driver: SerialDriver) -> None:
+    pair.base.faults.corrupt_prob = 0.003
+    pair.base.faults.drop_prob = 0.003
+    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 1.0)
+    assert frames[-1].link.bad_frames > 0
+    assert frames[-1].link.state is not LinkState.LOST
+    assert np.all(last_ticks(frames) > 600)
+
+
+def test_lidar_health_error_becomes_fault(tmp_path) -> None:
+    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path) as pair:
+        assert pair.lidar is not None
+        pair.lidar.set_health_error(0x8002)
+        d = SerialDriver.from_url(pair.url(), PROFILE)
+        try:
+            assert wait_for(lambda: "health error" in (d.read().fault or ""), timeout=2.0)
+            pair.lidar.set_health_error(None)
+            assert wait_for(lambda: d.read().scan is not None, timeout=5.0)
+        finally:
+            d.close()
+
+
+def test_lidar_unplug_fault_and_recovery(pair: EmulatorPair, driver: SerialDriver) -> None:
+    assert wait_for(lambda: driver.read().scan is not None, timeout=2.0)
+    assert pair.lidar is not None
+    pair.lidar.unplug()
+    assert wait_for(lambda: "lidar" in (driver.read().fault or ""), timeout=2.0)
+    pair.lidar.replug()
+    assert wait_for(lambda: driver.read().scan is not None, timeout=5.0)
+
+
+def test_lidar_stall_restarts_scan(pair: EmulatorPair, driver: SerialDriver) -> None:
+    assert wait_for(lambda: driver.read().scan is not None, timeout=2.0)
+    assert pair.lidar is not None
+    requests_before = list(pair.lidar.requests)
+    pair.lidar.faults.stall = True
+    assert wait_for(lambda: "silent" in (driver.read().fault or ""), timeout=2.5)
+    pair.lidar.faults.stall = False
+    assert wait_for(lambda: driver.read().scan is not None, timeout=4.0)
+    new = pair.lidar.requests[len(requests_before) :]
+    assert 0x25 in new and 0x20 in new  # STOP then SCAN again
+
+
+def test_wrong_device_on_the_base_port_is_diagnosed(pair: EmulatorPair) -> None:
+    """The lidar's port given as the base: bytes arrive but no telemetry, and the reason says so."""
+    assert pair.lidar_path is not None
+    # make the "lidar" stream something: ask it to scan through a raw port, then close that port
+    with serial.Serial(pair.lidar_path, 115200, timeout=0.05) as ser:
+        ser.write(b"\xa5\x20")
+    d = SerialDriver(pair.lidar_path, PROFILE)
+    try:
+        assert wait_for(lambda: "wrong port or baud" in d.read().link.reason, timeout=2.0)
+        assert d.read().link.state is LinkState.LOST
+    finally:
+        d.close()
