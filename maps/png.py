@@ -25,6 +25,9 @@ def encode_png(image: np.ndarray, compress_level: int = 6) -> bytes:
     rows = img.reshape(h, w * channels)
     raw = np.hstack((np.zeros((h, 1), dtype=np.uint8), rows)).tobytes()  # filter type 0 per row
     header = struct.pack(">IIBBBBB", w, h, 8, color_type, 0, 0, 0)
-    return b"\x89PNG\r\n\x1a\n" + _chunk(b"IHDR", header) + _chunk(b"IDAT", zlib.compress(raw, compress_level)) + (
-        _chunk(b"IEND", b"")
+    return (
+        b"\x89PNG\r\n\x1a\n"
+        + _chunk(b"IHDR", header)
+        + _chunk(b"IDAT", zlib.compress(raw, compress_level))
+        + (_chunk(b"IEND", b""))
     )

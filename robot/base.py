@@ -8,7 +8,7 @@ every driver) and it does not decide anything: the session owns policy.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from enum import Enum
+from enum import StrEnum
 from typing import Protocol, runtime_checkable
 
 import numpy as np
@@ -40,7 +40,7 @@ class IrReading:
     ranges: np.ndarray  # metres to the nearest object (inf if none within range)
 
 
-class LinkState(str, Enum):
+class LinkState(StrEnum):
     OK = "ok"
     DEGRADED = "degraded"
     LOST = "lost"

@@ -203,7 +203,8 @@ def load_profile(name_or_path: str | Path) -> RobotProfile:
         path = PROFILE_DIR / f"{name_or_path}.toml"
     if not path.is_file():
         raise ProfileError(
-            f"unknown profile {str(name_or_path)!r}: not a file and not one of {', '.join(available_profiles())}"
+            f"unknown profile {str(name_or_path)!r}: "
+            f"not a file and not one of {', '.join(available_profiles())}"
         )
     try:
         data = tomllib.loads(path.read_text())
