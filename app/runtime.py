@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import logging
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 from sqlalchemy.engine import Engine
@@ -13,6 +14,7 @@ from app.drivers import make_driver
 from app.map_store import MapStore
 from app.session import Session, SessionOptions
 from app.settings import Settings
+from nav.types import Pose2D
 from robot.clock import Clock, RealClock
 from robot.profiles import RobotProfile, load_profile
 
@@ -30,6 +32,8 @@ class Runtime:
     viewer: object | None = None
     world_name: str | None = None
     features: dict[str, object] = field(default_factory=dict)  # feature module name -> its handle
+    # What a click-and-drag in the 3D view does, by kind ("goal", "initial_pose"); set by features.
+    pose_input_handlers: dict[str, Callable[[Pose2D], None]] = field(default_factory=dict)
 
     @classmethod
     def build(cls, settings: Settings, clock: Clock | None = None) -> Runtime:
@@ -63,12 +67,21 @@ class Runtime:
         if self.settings.viewer:
             from app.viewer.scene import Viewer
 
-            self.viewer = Viewer(self.session.bus)
-            self.session_viewer_hooks()
+            self.viewer = Viewer(
+                self.session.bus, footprint=self.profile.footprint_polygon(), on_pose_input=self.on_pose_input
+            )
             self.viewer.start()
 
-    def session_viewer_hooks(self) -> None:
-        """Clicks in the 3D view become session requests (wired up by the navigation features)."""
+    def on_pose_input(self, kind: str, pose: Pose2D) -> None:
+        """A pose set in the 3D view (viser's thread): hand it to the feature that handles this kind."""
+        handler = self.pose_input_handlers.get(kind)
+        if handler is None:
+            self.session.add_event("refused", what=kind, reason=f"nothing handles a {kind} yet")
+            return
+        try:
+            handler(pose)
+        except Exception as exc:  # a refusal (e.g. goal in a wall) is shown, never raised into viser
+            self.session.add_event("refused", what=kind, reason=str(exc))
 
     def close(self) -> None:
         for name, handle in reversed(list(self.features.items())):

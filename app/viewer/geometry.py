@@ -1,0 +1,95 @@
+"""Pure numpy: navigation data -> the float32 arrays viser draws (line segments, arrows, points).
+
+Everything is vectorized over points / poses / samples (these run every viewer tick), and rows holding a
+non-finite value are dropped rather than sent: the client would draw NaN as lines to infinity.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nav.types import LaserScan, Pose2D
+
+
+def finite_rows(a: np.ndarray) -> np.ndarray:
+    """Rows of ``a`` (first axis) whose every value is finite."""
+    return a[np.all(np.isfinite(a.reshape(a.shape[0], -1)), axis=1)]
+
+
+def yaw_wxyz(theta: float) -> np.ndarray:
+    """Quaternion (w, x, y, z) of a rotation by ``theta`` about +z (REP-103 yaw)."""
+    return np.array([math.cos(theta / 2.0), 0.0, 0.0, math.sin(theta / 2.0)])
+
+
+def polyline_segments(xy: np.ndarray, z: float = 0.0) -> np.ndarray:
+    """(N, 2+) polyline -> (N-1, 2, 3) segments at height ``z``; non-finite vertices are dropped."""
+    xy = np.asarray(xy, dtype=np.float32)
+    xy = finite_rows(xy.reshape(xy.shape[0], -1)[:, :2]) if xy.size else xy.reshape(0, 2)
+    if xy.shape[0] < 2:
+        return np.zeros((0, 2, 3), dtype=np.float32)
+    seg = np.empty((xy.shape[0] - 1, 2, 3), dtype=np.float32)
+    seg[:, 0, :2] = xy[:-1]
+    seg[:, 1, :2] = xy[1:]
+    seg[:, :, 2] = z
+    return seg
+
+
+def ring_segments(polygon: np.ndarray, z: float = 0.0) -> np.ndarray:
+    """Closed (N, 2) polygon (e.g. a Nav2 footprint) -> (N, 2, 3) segments."""
+    ring = np.asarray(polygon, dtype=float).reshape(-1, 2)
+    return polyline_segments(np.vstack((ring, ring[:1])), z)
+
+
+def trajectory_segments(samples: np.ndarray, z: float = 0.0, max_samples: int | None = None) -> np.ndarray:
+    """(K, N, 2+) sampled trajectories (DWB/MPPI style) -> (K'*(N-1), 2, 3) segments, every
+    ``ceil(K / max_samples)``-th trajectory kept so the browser is not flooded."""
+    s = np.asarray(samples, dtype=np.float32)
+    if max_samples is not None and s.shape[0] > max_samples:
+        s = s[:: math.ceil(s.shape[0] / max_samples)]
+    k, n = s.shape[0], s.shape[1]
+    if n < 2:
+        return np.zeros((0, 2, 3), np.float32)
+    seg = np.empty((k, n - 1, 2, 3), np.float32)
+    seg[:, :, 0, :2] = s[:, :-1, :2]
+    seg[:, :, 1, :2] = s[:, 1:, :2]
+    seg[..., 2] = z
+    return finite_rows(seg.reshape(-1, 2, 3))
+
+
+def pose_arrows(poses: np.ndarray, length: float, z: float = 0.0, max_poses: int | None = None) -> np.ndarray:
+    """(N, 3+) x, y, theta (extra columns such as weights ignored) -> (N', 2, 3) arrows, like Rviz's
+    PoseArray display of the AMCL particle cloud; subsampled to at most ``max_poses``."""
+    p = np.asarray(poses, dtype=float)
+    p = finite_rows(p.reshape(p.shape[0], -1)[:, :3])
+    if max_poses is not None and len(p) > max_poses:
+        p = p[:: math.ceil(len(p) / max_poses)]
+    seg = np.empty((len(p), 2, 3), np.float32)
+    seg[:, 0, 0], seg[:, 0, 1] = p[:, 0], p[:, 1]
+    seg[:, 1, 0] = p[:, 0] + length * np.cos(p[:, 2])
+    seg[:, 1, 1] = p[:, 1] + length * np.sin(p[:, 2])
+    seg[:, :, 2] = z
+    return seg
+
+
+def edge_segments(edges: np.ndarray, z: float = 0.0) -> np.ndarray:
+    """(E, 2, 2) pose-graph edges (from xy, to xy) -> (E, 2, 3) segments."""
+    e = finite_rows(np.asarray(edges, dtype=np.float32).reshape(-1, 2, 2))
+    seg = np.empty((e.shape[0], 2, 3), np.float32)
+    seg[:, :, :2] = e
+    seg[:, :, 2] = z
+    return seg
+
+
+def scan_points(scan: LaserScan, laser_pose: Pose2D, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Valid returns (inf / nan / out-of-range dropped, REP-117) as (N, 3) float32 points in base_link,
+    plus their (N,) ranges for colouring."""
+    mask = scan.valid_mask()
+    r = scan.ranges[mask]
+    a = scan.angles[mask]
+    xy = laser_pose.transform_points(np.column_stack((r * np.cos(a), r * np.sin(a))))
+    pts = np.empty((xy.shape[0], 3), np.float32)
+    pts[:, :2] = xy
+    pts[:, 2] = z
+    return pts, r

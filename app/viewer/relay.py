@@ -1,0 +1,122 @@
+"""Serve the viser client through the dashboard's own port (viser.md option C).
+
+viser binds its own socket (127.0.0.1, ephemeral port) and has no ASGI hook, so FastAPI serves the
+client page at ``GET /viz/`` and relays the websocket ``/viz`` byte-for-byte to viser, forwarding the
+``viser-v<version>`` subprotocol (any other version is refused by viser with close code 1002). One
+origin and one port: sign-in can sit in front through ``authorize``, and no iframe reconnect trouble.
+The relay only copies bytes on uvicorn's loop; no decoding, no numpy.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import inspect
+import logging
+import pathlib
+from collections.abc import Awaitable, Callable
+from typing import TYPE_CHECKING
+
+import viser
+import websockets
+from fastapi import APIRouter, Request, WebSocket
+from fastapi.responses import FileResponse, RedirectResponse
+from starlette.websockets import WebSocketDisconnect
+
+if TYPE_CHECKING:
+    from app.viewer.scene import Viewer
+
+log = logging.getLogger(__name__)
+
+CLIENT_HTML = pathlib.Path(viser.__file__).parent / "client" / "build" / "index.html"
+SUBPROTOCOL = f"viser-v{viser.__version__}"
+
+Authorize = Callable[[WebSocket], bool | Awaitable[bool]]
+
+# Close codes (RFC 6455 §7.4.1): 1008 policy violation (not signed in), 1013 try again later.
+CLOSE_POLICY = 1008
+CLOSE_TRY_AGAIN = 1013
+
+
+def _allow_all(_ws: WebSocket) -> bool:
+    return True
+
+
+def make_router(get_viewer: Callable[[], Viewer | None], authorize: Authorize = _allow_all) -> APIRouter:
+    """Routes ``GET /viz`` (redirect), ``GET /viz/`` (viser client page) and ``WS /viz`` (relay)."""
+    router = APIRouter()
+
+    @router.get("/viz", include_in_schema=False)
+    async def viz_redirect(request: Request) -> RedirectResponse:
+        return RedirectResponse(request.url.path + "/", status_code=307)  # keeps any mount prefix
+
+    @router.get("/viz/", include_in_schema=False)
+    async def viz_index() -> FileResponse:
+        return FileResponse(CLIENT_HTML, media_type="text/html")
+
+    @router.websocket("/viz")
+    async def viz_ws(ws: WebSocket) -> None:
+        ok = authorize(ws)
+        if inspect.isawaitable(ok):
+            ok = await ok
+        if not ok:
+            await ws.close(code=CLOSE_POLICY)
+            return
+        viewer = get_viewer()
+        if viewer is None or not viewer.running:
+            await ws.close(code=CLOSE_TRY_AGAIN)
+            return
+        protos = list(ws.scope.get("subprotocols", []))
+        try:
+            upstream = await websockets.connect(
+                f"ws://127.0.0.1:{viewer.port}",
+                subprotocols=protos or None,  # type: ignore[arg-type]
+                max_size=None,
+                compression=None,
+                open_timeout=5.0,
+            )
+        except (OSError, RuntimeError, websockets.InvalidHandshake, TimeoutError) as exc:
+            log.warning("viz relay: viser upstream unavailable: %s", exc)
+            await ws.close(code=CLOSE_TRY_AGAIN)
+            return
+        await ws.accept(subprotocol=upstream.subprotocol)
+        await relay(ws, upstream)
+
+    return router
+
+
+async def relay(ws: WebSocket, upstream: websockets.ClientConnection) -> None:
+    """Copy frames both ways until either side closes, then close the other side."""
+
+    async def down() -> None:
+        async for msg in upstream:
+            if isinstance(msg, bytes):
+                await ws.send_bytes(msg)
+            else:
+                await ws.send_text(msg)
+
+    async def up() -> None:
+        while True:
+            msg = await ws.receive()
+            if msg["type"] == "websocket.disconnect":
+                return
+            if msg.get("bytes") is not None:
+                await upstream.send(msg["bytes"])
+            elif msg.get("text") is not None:
+                await upstream.send(msg["text"])
+
+    tasks = [asyncio.create_task(down()), asyncio.create_task(up())]
+    try:
+        await asyncio.wait(tasks, return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        for t in tasks:
+            t.cancel()
+        for t in tasks:
+            with contextlib.suppress(asyncio.CancelledError, Exception):
+                await t
+        await upstream.close()
+        code = upstream.close_code
+        if code is None or code in (1005, 1006, 1015):  # reserved codes that must not be sent
+            code = 1000
+        with contextlib.suppress(RuntimeError, WebSocketDisconnect):
+            await ws.close(code=code)

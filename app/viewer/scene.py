@@ -1,0 +1,598 @@
+"""The 3D view (the Rviz2 replacement): session snapshots in, viser scene updates out.
+
+One ``Viewer`` owns one ``viser.ViserServer`` bound to 127.0.0.1 on an ephemeral port (the dashboard
+relays it, see ``relay.py``). Two daemon threads subscribe to the ``SnapshotBus``, each through its own
+one-slot mailbox so neither can slow the control loop:
+
+* the *scene* thread updates the robot pose (one ``atomic()`` step), scan, trail, plans, goal,
+  particles, graph edges and the status line at <= ``rate_hz`` (Rviz redraws at about this rate);
+* the *grid* thread re-tiles the occupancy map and the costmap overlay at <= ``map_rate_hz``, because
+  PNG encoding is the one expensive step and must not stall pose updates.
+
+Every node has a stable name and is created once; optional layers are hidden, never removed, when the
+snapshot has no data for them (viser keeps tombstones for removed nodes, see viser.md §8).
+Pointer input follows Rviz2's tools: a click sets a position, Shift+drag on the map sets position and
+heading; both end in ``on_pose_input(kind, pose)``, which must only enqueue.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import logging
+import math
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+import viser
+
+from app.bus import Snapshot, SnapshotBus, Subscription
+from app.viewer import geometry as geo
+from app.viewer import palette
+from app.viewer.pose_input import (
+    PoseInputError,
+    ground_through,
+    heading_towards,
+    pose_from_press_drag,
+    ray_ground,
+)
+from app.viewer.tiles import TiledGridLayer, TileOptions
+from nav.types import Costmap, Pose2D, wrap_angle
+
+log = logging.getLogger(__name__)
+
+PoseInputCallback = Callable[[str, Pose2D], None]
+POSE_KINDS = {"goal": "goal", "initial pose": "initial_pose"}
+
+# Toggleable layers: checkbox label -> scene node it drives.
+LAYERS: dict[str, str] = {
+    "Map": "/map",
+    "Costmap": "/costmap",
+    "Scan": "/robot/scan",
+    "Trail": "/trail",
+    "Global path": "/plan/global",
+    "Local trajectories": "/plan/local",
+    "Goal & waypoints": "/goal",
+    "Particles": "/particles",
+    "Loop closures": "/graph/edges",
+}
+
+
+@dataclass(frozen=True)
+class ViewerOptions:
+    """Display settings (Rviz display defaults where one exists)."""
+
+    rate_hz: float = 15.0
+    """Maximum scene update rate for pose, scan, plans (Hz)."""
+    map_rate_hz: float = 2.0
+    """Maximum map / costmap re-tiling rate (Hz); slam_toolbox publishes its map at 0.2..1 Hz."""
+    status_rate_hz: float = 5.0
+    """Status line refresh rate (Hz)."""
+    map_tiles: TileOptions = field(default_factory=TileOptions)
+    """Tiling of the occupancy grid."""
+    costmap_tiles: TileOptions = field(default_factory=lambda: TileOptions(upsample=2, z=0.005))
+    """Tiling of the costmap overlay (floats 5 mm above the map, no z-fighting)."""
+    map_alpha: float = 0.7
+    """Rviz Map display alpha (baked against Rviz's background, see palette.map_palette)."""
+    costmap_alpha: float = 0.7
+    """Rviz costmap colour scheme alpha."""
+    scan_point_size: float = 0.04
+    """Scan point size in metres (Rviz LaserScan "Size (m)" default 0.01 is too small for a browser)."""
+    scan_height: float = 0.02
+    """Scan points drawn this high above the ground so they are not hidden by the map."""
+    path_thickness_px: float = 3.0
+    """Line thickness of plans and trail in screen pixels."""
+    particle_arrow_length: float = 0.15
+    """AMCL particle arrow length in metres."""
+    max_particles: int = 4000
+    """Particles beyond this are subsampled for display."""
+    max_local_samples: int = 400
+    """Local trajectory samples beyond this are subsampled for display."""
+
+
+@dataclass
+class ViewerStats:
+    """Counters a test, benchmark or health page can read."""
+
+    updates: int = 0
+    grid_updates: int = 0
+    last_update_s: float = 0.0
+    errors: int = 0
+
+
+class Viewer:
+    """viser scene fed by a ``SnapshotBus``. ``start()`` binds the server, ``stop()`` frees it."""
+
+    def __init__(
+        self,
+        bus: SnapshotBus,
+        rate_hz: float = 15.0,
+        *,
+        footprint: np.ndarray | None = None,
+        options: ViewerOptions | None = None,
+        on_pose_input: PoseInputCallback | None = None,
+    ) -> None:
+        opts = options or ViewerOptions()
+        if rate_hz != opts.rate_hz:
+            opts = dataclasses.replace(opts, rate_hz=rate_hz)
+        if opts.rate_hz <= 0.0 or opts.map_rate_hz <= 0.0:
+            raise ValueError("viewer rates must be positive")
+        self.options = opts
+        self.bus = bus
+        self.on_pose_input: PoseInputCallback | None = on_pose_input
+        self.stats = ViewerStats()
+        self._footprint = None if footprint is None else np.asarray(footprint, dtype=float).reshape(-1, 2)
+        self._server: viser.ViserServer | None = None
+        self._stop = threading.Event()
+        self._threads: list[threading.Thread] = []
+        self._subs: list[Subscription] = []
+        self._lock = threading.RLock()  # visibility state, shared by the scene, grid and viser threads
+        self._h: dict[str, Any] = {}  # scene handles by node name
+        self._has_data: dict[str, bool] = {}
+        self._shown: dict[str, bool] = {}
+        self._checks: dict[str, Any] = {}
+        self._last: dict[str, Any] = {}  # identity of the last data drawn per layer
+        self._pose = Pose2D()
+        self._camera_set = False
+        self._status_due = 0.0
+
+    # ---------------------------------------------------------------- lifecycle
+    @property
+    def server(self) -> viser.ViserServer:
+        if self._server is None:
+            raise RuntimeError("viewer not started")
+        return self._server
+
+    @property
+    def port(self) -> int:
+        return self.server.get_port()
+
+    @property
+    def running(self) -> bool:
+        return self._server is not None
+
+    def start(self) -> None:
+        """Bind viser on 127.0.0.1 (ephemeral port), build the scene and GUI, start both threads."""
+        if self._server is not None:
+            return
+        self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+        self._last.clear()  # a restarted server has an empty scene: redraw everything
+        self._camera_set = False
+        self._build_scene()
+        self._build_gui()
+        self._stop.clear()
+        for target, name in ((self._scene_loop, "viewer-scene"), (self._grid_loop, "viewer-grid")):
+            sub = self.bus.subscribe()
+            self._subs.append(sub)
+            t = threading.Thread(target=target, args=(sub,), name=name, daemon=True)
+            self._threads.append(t)
+            t.start()
+
+    def stop(self) -> None:
+        """Stop the threads, leave the bus and free the port. Safe to call twice."""
+        self._stop.set()
+        for sub in self._subs:
+            sub.close()
+        for t in self._threads:
+            t.join(timeout=5.0)
+        self._threads.clear()
+        self._subs.clear()
+        if self._server is not None:
+            self.map_layer.close()
+            self.costmap_layer.close()
+            self._server.stop()
+            self._server = None
+
+    def __enter__(self) -> Viewer:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # ---------------------------------------------------------------- scene
+    def _build_scene(self) -> None:
+        s = self.server.scene
+        o = self.options
+        s.set_up_direction("+z")
+        self.server.initial_camera.position = (-4.0, -6.0, 8.0)
+        self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
+        self.map_layer = TiledGridLayer(
+            self.server, "/map", palette.map_palette(o.map_alpha), o.map_tiles, self._bind_tile_drag
+        )
+        self.costmap_layer = TiledGridLayer(
+            self.server, "/costmap", palette.costmap_palette(o.costmap_alpha), o.costmap_tiles
+        )
+        h = self._h
+        h["/robot"] = s.add_frame("/robot", show_axes=False)
+        h["/robot/footprint"] = s.add_line_segments(
+            "/robot/footprint",
+            np.zeros((0, 2, 3), np.float32),
+            palette.FOOTPRINT,
+            thickness=o.path_thickness_px,
+            thickness_units="screen",
+        )
+        h["/robot/heading"] = s.add_arrows(
+            "/robot/heading",
+            np.array([[[0.0, 0.0, 0.03], [0.25, 0.0, 0.03]]], np.float32),
+            palette.HEADING,
+            shaft_radius=0.012,
+            head_radius=0.035,
+            head_length=0.07,
+        )
+        h["/robot/scan"] = s.add_point_cloud(
+            "/robot/scan",
+            np.zeros((0, 3), np.float32),
+            np.zeros((0, 3), np.uint8),
+            point_size=o.scan_point_size,
+            point_shape="circle",
+            precision="float32",
+        )
+        h["/robot/label"] = s.add_label("/robot/label", "", position=(0.0, 0.0, 0.35), visible=False)
+        h["/trail"] = self._lines("/trail", palette.TRAIL)
+        h["/plan"] = s.add_frame("/plan", show_axes=False)
+        h["/plan/global"] = self._lines("/plan/global", palette.GLOBAL_PLAN)
+        h["/plan/local"] = s.add_frame("/plan/local", show_axes=False)
+        h["/plan/local/samples"] = self._lines("/plan/local/samples", palette.LOCAL_SAMPLES, 1.0)
+        h["/plan/local/best"] = self._lines("/plan/local/best", palette.LOCAL_BEST)
+        h["/goal"] = s.add_frame("/goal", axes_length=0.3, axes_radius=0.015, visible=False)
+        h["/goal/waypoints"] = s.add_point_cloud(
+            "/goal/waypoints",
+            np.zeros((0, 3), np.float32),
+            np.array(palette.WAYPOINTS, np.uint8),
+            point_size=0.12,
+            point_shape="diamond",
+            precision="float32",
+        )
+        h["/particles"] = s.add_arrows(
+            "/particles",
+            np.zeros((0, 2, 3), np.float32),
+            palette.PARTICLES,
+            shaft_radius=0.005,
+            head_radius=0.015,
+            head_length=0.04,
+            visible=False,
+        )
+        h["/graph"] = s.add_frame("/graph", show_axes=False)
+        h["/graph/edges"] = self._lines("/graph/edges", palette.GRAPH_EDGES, 2.0)
+        h["/input/preview"] = s.add_arrows(
+            "/input/preview",
+            np.zeros((1, 2, 3), np.float32),
+            palette.PREVIEW,
+            shaft_radius=0.02,
+            head_radius=0.06,
+            head_length=0.12,
+            visible=False,
+        )
+        h["/map"] = self.map_layer.root
+        h["/costmap"] = self.costmap_layer.root
+        self._has_data = {name: False for name in LAYERS.values()}
+        self._has_data["/robot/scan"] = True  # shown empty until a scan arrives
+        self._shown = {name: True for name in LAYERS.values()}
+        for name in LAYERS.values():
+            self._refresh(name)
+        s.on_click()(self._on_scene_click)
+
+    def _lines(self, name: str, color: tuple[int, int, int], px: float | None = None) -> Any:
+        return self.server.scene.add_line_segments(
+            name,
+            np.zeros((0, 2, 3), np.float32),
+            color,
+            thickness=self.options.path_thickness_px if px is None else px,
+            thickness_units="screen",
+            visible=False,
+        )
+
+    def _build_gui(self) -> None:
+        gui = self.server.gui
+        gui.configure_theme(
+            dark_mode=True,
+            show_logo=False,
+            show_share_button=False,
+            brand_color=(40, 120, 255),
+        )
+        gui.set_panel_label("navdeck")
+        self.status = gui.add_markdown("**waiting for the robot…**")
+        with gui.add_folder("Pose input"):
+            self.click_mode = gui.add_dropdown("Click sets", tuple(POSE_KINDS), initial_value="goal")
+            gui.add_markdown("Click: position. **Shift+drag** on the map: position and heading.")
+        with gui.add_folder("Layers"):
+            for label, node in LAYERS.items():
+                cb = gui.add_checkbox(label, True)
+                self._checks[node] = cb
+                cb.on_update(lambda _ev, node=node: self._refresh(node))
+
+    def _refresh(self, node: str) -> None:
+        """Show a layer iff its checkbox is on and the latest snapshot had data for it."""
+        with self._lock:
+            cb = self._checks.get(node)
+            want = bool(self._has_data.get(node, False)) and (cb is None or bool(cb.value))
+            if self._shown.get(node) != want:
+                self._shown[node] = want
+                self._h[node].visible = want
+
+    def _set_data(self, node: str, present: bool) -> None:
+        if self._has_data.get(node) != present:
+            with self._lock:
+                self._has_data[node] = present
+            self._refresh(node)
+
+    def is_shown(self, node: str) -> bool:
+        """Whether a toggleable layer is currently visible (data present and checkbox on)."""
+        return bool(self._shown.get(node, False))
+
+    def set_layer_enabled(self, label: str, enabled: bool) -> None:
+        """Tick or untick a layer checkbox (same effect as the user doing it)."""
+        self._checks[LAYERS[label]].value = enabled
+
+    # ---------------------------------------------------------------- snapshot -> scene
+    def apply(self, snap: Snapshot) -> None:
+        """Apply one snapshot synchronously: scene layers then grids (tests, benchmarks, replays)."""
+        self.apply_scene(snap)
+        self.apply_grids(snap)
+
+    def apply_scene(self, snap: Snapshot) -> None:
+        """Everything except the grids: cheap per-tick updates (~0.1 ms per property, viser.md §10)."""
+        t0 = time.perf_counter()
+        h, last, o = self._h, self._last, self.options
+        pose = snap.pose
+        if pose.is_finite():
+            self._pose = pose
+            with self.server.atomic():
+                h["/robot"].position = (pose.x, pose.y, 0.0)
+                h["/robot"].wxyz = geo.yaw_wxyz(pose.theta)
+
+        fp = snap.extras.get("footprint", self._footprint)
+        if fp is not None and fp is not last.get("footprint"):
+            last["footprint"] = fp
+            h["/robot/footprint"].points = geo.ring_segments(fp, 0.01)
+            self._draw_body(np.asarray(fp, dtype=float).reshape(-1, 2))
+
+        if snap.scan is not None and (snap.scan is not last.get("scan") or snap.laser_pose != last.get("lp")):
+            last["scan"], last["lp"] = snap.scan, snap.laser_pose
+            pts, r = geo.scan_points(snap.scan, snap.laser_pose, o.scan_height)
+            with self.server.atomic():
+                h["/robot/scan"].points = pts
+                h["/robot/scan"].colors = palette.range_colors(r, snap.scan.range_max)
+
+        if snap.trail is not last.get("trail"):
+            last["trail"] = snap.trail
+            present = snap.trail is not None and len(snap.trail) >= 2
+            if present:
+                h["/trail"].points = geo.polyline_segments(snap.trail, 0.003)
+            self._set_data("/trail", present)
+
+        if snap.path is not last.get("path"):
+            last["path"] = snap.path
+            present = snap.path is not None and len(snap.path) >= 2
+            if present:
+                h["/plan/global"].points = geo.polyline_segments(snap.path.poses, 0.008)
+            self._set_data("/plan/global", present)
+
+        self._apply_local_plan(snap)
+
+        goal_key = (snap.goal, id(snap.extras.get("waypoints")))
+        if goal_key != last.get("goal"):
+            last["goal"] = goal_key
+            wps = snap.extras.get("waypoints")
+            goal = snap.goal if snap.goal is not None and snap.goal.is_finite() else Pose2D()
+            with self.server.atomic():
+                h["/goal"].position = (goal.x, goal.y, 0.0)
+                h["/goal"].wxyz = geo.yaw_wxyz(goal.theta)
+                h["/goal"].show_axes = snap.goal is not None
+            if wps is not None and len(wps):
+                w = np.array(
+                    [(p.x, p.y) if isinstance(p, Pose2D) else tuple(p)[:2] for p in wps], dtype=float
+                )
+                local = goal.inverse().transform_points(geo.finite_rows(w))  # children follow /goal's pose
+                pts = np.column_stack((local, np.full(len(local), 0.05))).astype(np.float32)
+            else:
+                pts = np.zeros((0, 3), np.float32)
+            h["/goal/waypoints"].points = pts
+            self._set_data("/goal", snap.goal is not None or len(pts) > 0)
+
+        if snap.particles is not last.get("particles"):
+            last["particles"] = snap.particles
+            present = snap.particles is not None and len(snap.particles) > 0
+            if present:
+                h["/particles"].points = geo.pose_arrows(
+                    snap.particles, o.particle_arrow_length, 0.02, o.max_particles
+                )
+            self._set_data("/particles", present)
+
+        edges = snap.extras.get("graph_edges")
+        if edges is not last.get("edges"):
+            last["edges"] = edges
+            present = edges is not None and len(edges) > 0
+            if present:
+                h["/graph/edges"].points = geo.edge_segments(edges, 0.012)
+            self._set_data("/graph/edges", present)
+
+        if snap.behavior != last.get("behavior"):
+            last["behavior"] = snap.behavior
+            if snap.behavior:
+                h["/robot/label"].text = snap.behavior
+            h["/robot/label"].visible = bool(snap.behavior)
+
+        now = time.monotonic()
+        if now >= self._status_due:
+            self._status_due = now + 1.0 / self.options.status_rate_hz
+            self.status.content = self.status_text(snap)
+        self.stats.updates += 1
+        self.stats.last_update_s = time.perf_counter() - t0
+
+    def _draw_body(self, ring: np.ndarray) -> None:
+        """A translucent box over the footprint's bounding box, so the robot is visible from afar
+        (Rviz shows the URDF; a 2D footprint is all a profile gives us)."""
+        lo, hi = ring.min(axis=0), ring.max(axis=0)
+        centre = (lo + hi) / 2.0
+        self._h["/robot/body"] = self.server.scene.add_box(
+            "/robot/body",
+            color=(90, 150, 230),
+            dimensions=(float(hi[0] - lo[0]), float(hi[1] - lo[1]), 0.08),
+            position=(float(centre[0]), float(centre[1]), 0.04),
+            opacity=0.6,
+            cast_shadow=False,
+            receive_shadow=False,
+        )
+
+    def _apply_local_plan(self, snap: Snapshot) -> None:
+        h, last = self._h, self._last
+        lp = snap.local_plan
+        best_idx = snap.extras.get("local_plan_best")
+        if lp is last.get("local") and best_idx == last.get("local_best"):
+            return
+        last["local"], last["local_best"] = lp, best_idx
+        present = lp is not None and lp.size > 0
+        if present:
+            arr = np.asarray(lp, dtype=float)
+            if arr.ndim == 2:  # one trajectory: it is the chosen one
+                best, samples = arr, None
+            else:  # (K, N, 2) samples, extras["local_plan_best"] picks the chosen one
+                k = arr.shape[0]
+                best = arr[int(best_idx)] if best_idx is not None and 0 <= int(best_idx) < k else None
+                samples = arr
+            if samples is not None:
+                h["/plan/local/samples"].points = geo.trajectory_segments(
+                    samples, 0.01, self.options.max_local_samples
+                )
+            h["/plan/local/samples"].visible = samples is not None
+            if best is not None:
+                h["/plan/local/best"].points = geo.polyline_segments(best, 0.012)
+            h["/plan/local/best"].visible = best is not None
+        self._set_data("/plan/local", present)
+
+    def apply_grids(self, snap: Snapshot) -> int:
+        """Re-tile the map and costmap if they changed; return the number of tiles encoded."""
+        encoded = 0
+        grid = snap.grid
+        key = (id(grid), snap.grid_version)
+        if key != self._last.get("grid"):
+            self._last["grid"] = key
+            if grid is not None:
+                encoded += self.map_layer.update(grid.geometry, grid.data)
+                if not self._camera_set:
+                    self._aim_camera(grid.geometry)
+            self._set_data("/map", grid is not None)
+        cm = snap.extras.get("costmap")
+        cm_key = (id(cm), snap.extras.get("costmap_version"))
+        if cm_key != self._last.get("costmap"):
+            self._last["costmap"] = cm_key
+            present = isinstance(cm, Costmap)
+            if present:
+                encoded += self.costmap_layer.update(cm.geometry, cm.costs)
+            self._set_data("/costmap", present)
+        if encoded:
+            self.stats.grid_updates += 1
+        return encoded
+
+    def _aim_camera(self, geometry: Any) -> None:
+        """Initial camera: look down at the map centre at about 55 degrees from the horizon."""
+        w, hgt = geometry.size_m
+        c = geometry.origin.transform_points(np.array([[w / 2.0, hgt / 2.0]]))[0]
+        span = max(w, hgt, 2.0)
+        self.server.initial_camera.look_at = (float(c[0]), float(c[1]), 0.0)
+        self.server.initial_camera.position = (float(c[0]), float(c[1] - 0.4 * span), 0.55 * span)
+        self._camera_set = True
+
+    @staticmethod
+    def status_text(snap: Snapshot) -> str:
+        """One markdown line: mode, pose, speed, behaviour, and any stop condition."""
+        p, v = snap.pose, snap.velocity
+        parts = [
+            f"**{snap.mode}**",
+            f"x {p.x:.2f} y {p.y:.2f} θ {math.degrees(wrap_angle(p.theta)):.0f}°",
+            f"v {v.vx:.2f} m/s ω {v.wz:.2f} rad/s",
+        ]
+        if snap.behavior:
+            parts.append(f"_{snap.behavior}_")
+        if snap.estop:
+            parts.append("**E-STOP**")
+        if snap.fault:
+            parts.append(f"fault: {snap.fault}")
+        return " · ".join(parts)
+
+    # ---------------------------------------------------------------- threads
+    def _scene_loop(self, sub: Subscription) -> None:
+        period = 1.0 / self.options.rate_hz
+        due = 0.0
+        while not self._stop.is_set():
+            snap = sub.wait(timeout=0.25)
+            if snap is None:
+                continue
+            wait = due - time.monotonic()
+            if wait > 0.0 and self._stop.wait(wait):
+                return
+            snap = sub.take() or snap  # the newest one after the rate-limit pause
+            due = time.monotonic() + period
+            try:
+                self.apply_scene(snap)
+            except Exception:  # a bad snapshot must not kill the view
+                self.stats.errors += 1
+                log.exception("viewer: scene update failed")
+
+    def _grid_loop(self, sub: Subscription) -> None:
+        period = 1.0 / self.options.map_rate_hz
+        due = 0.0
+        while not self._stop.is_set():
+            snap = sub.wait(timeout=0.25)
+            if snap is None:
+                continue
+            wait = due - time.monotonic()
+            if wait > 0.0 and self._stop.wait(wait):
+                return
+            snap = sub.take() or snap
+            try:
+                if self.apply_grids(snap):
+                    due = time.monotonic() + period
+            except Exception:
+                self.stats.errors += 1
+                log.exception("viewer: grid update failed")
+
+    # ---------------------------------------------------------------- pointer input
+    def _emit(self, kind: str, pose: Pose2D) -> None:
+        cb = self.on_pose_input
+        if cb is None or not pose.is_finite():
+            return
+        try:
+            cb(kind, pose)
+        except Exception:  # viser would only print it; keep the view alive
+            log.exception("viewer: on_pose_input failed")
+
+    def _kind(self) -> str:
+        return POSE_KINDS.get(str(self.click_mode.value), "goal")
+
+    def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
+        """Plain click: a goal faces the direction of travel, an initial pose keeps the estimate's heading."""
+        try:
+            xy = ray_ground(event.ray_origin, event.ray_direction)
+        except PoseInputError:
+            return
+        kind = self._kind()
+        theta = heading_towards(self._pose, xy) if kind == "goal" else self._pose.theta
+        self._emit(kind, Pose2D(float(xy[0]), float(xy[1]), theta))
+
+    def _bind_tile_drag(self, tile: viser.ImageHandle) -> None:
+        tile.on_drag("left", modifier="shift")(self._on_map_drag)
+
+    async def _on_map_drag(self, event: viser.SceneNodeDragEvent) -> None:
+        """Shift+drag on the map, as Rviz's pose tools: press = position, drag direction = heading.
+
+        ``async`` so viser runs the phases in order on its loop; it only does arithmetic and enqueues."""
+        press = np.asarray(event.start_position, dtype=float)
+        try:
+            release = ground_through(event.client.camera.position, event.end_position)
+        except (PoseInputError, AttributeError):
+            release = np.asarray(event.end_position, dtype=float)[:2]
+        pose = pose_from_press_drag(press, release, self._pose.theta)
+        preview = self._h["/input/preview"]
+        if event.phase == "end":
+            preview.visible = False
+            self._emit(self._kind(), pose)
+            return
+        tip = (pose.x + 0.5 * math.cos(pose.theta), pose.y + 0.5 * math.sin(pose.theta))
+        preview.points = np.array([[[pose.x, pose.y, 0.05], [tip[0], tip[1], 0.05]]], np.float32)
+        preview.visible = True
