@@ -1,0 +1,296 @@
+"""Layered costmap, as Nav2's ``Costmap2DROS`` + ``LayeredCostmap``: static, obstacle and inflation
+layers combined into one master grid of uint8 costs.
+
+Combination follows Nav2: the static layer overwrites the master, the obstacle layer merges with
+``updateWithMax`` (its NO_INFORMATION cells are skipped; a known cell replaces an unknown master
+cell), then the inflation layer spreads costs around lethal cells. Two flavours:
+
+- global: the size and geometry of the map, static + obstacle + inflation;
+- local: a rolling window (Nav2 default 3 x 3 m) that follows the robot, obstacle + inflation and
+  optionally the static map sampled into the window.
+
+Updates are cheap: ``update`` only records the changed bounds; ``costmap()`` recomputes the master
+lazily and, like Nav2's ``updateBounds``, only over the changed region grown by two inflation radii
+(cells within one radius may change, and they depend on sources within another radius).
+
+Thread use: one owner (the control loop) calls ``update``/``clear``; ``costmap()`` returns an
+independent snapshot that a planner worker may keep.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nav.costmap.footprint import cells_in_polygon, circle_footprint, footprint_cost, footprint_radii
+from nav.costmap.inflation import InflationOptions, cell_inflation_radius, inflate
+from nav.costmap.obstacle_layer import Bounds, ObstacleLayer, ObstacleLayerOptions, _union
+from nav.costmap.static_layer import StaticLayerOptions, sample_costs, static_costs
+from nav.types import FREE_SPACE, NO_INFORMATION, Costmap, GridGeometry, LaserScan, OccupancyGrid, Pose2D
+
+
+class CostmapError(ValueError):
+    """Invalid costmap configuration (e.g. a rolling window without a size)."""
+
+
+@dataclass(frozen=True)
+class CostmapOptions:
+    """Nav2 ``Costmap2DROS`` parameters plus the options of each layer."""
+
+    resolution: float = 0.05
+    """Cell size (m) of a rolling window; a global costmap takes the map's. Nav2 default 0.05."""
+    width: float = 3.0
+    """Rolling-window width (m). Nav2 local costmap default 3."""
+    height: float = 3.0
+    """Rolling-window height (m). Nav2 local costmap default 3."""
+    rolling_window: bool = False
+    """Whether the grid follows the robot (local costmap). Nav2 default false."""
+    track_unknown_space: bool = True
+    """Keep unknown cells as NO_INFORMATION (255) instead of free. Nav2's global costmap sets true,
+    its local costmap leaves the default false."""
+    robot_radius: float = 0.1
+    """Radius (m) of a circular robot, used when ``footprint`` is empty. Nav2 default 0.1."""
+    footprint: tuple[tuple[float, float], ...] = ()
+    """Footprint polygon in base_link (m); empty means circular with ``robot_radius``."""
+    use_static_layer: bool = True
+    use_obstacle_layer: bool = True
+    use_inflation_layer: bool = True
+    static_layer: StaticLayerOptions = field(default_factory=StaticLayerOptions)
+    obstacle_layer: ObstacleLayerOptions = field(default_factory=ObstacleLayerOptions)
+    inflation_layer: InflationOptions = field(default_factory=InflationOptions)
+
+    def footprint_polygon(self) -> np.ndarray | None:
+        """The footprint as (K, 2), or None for a circular robot."""
+        return np.asarray(self.footprint, dtype=float) if self.footprint else None
+
+    @property
+    def inscribed_radius(self) -> float:
+        poly = self.footprint_polygon()
+        return self.robot_radius if poly is None else footprint_radii(poly)[0]
+
+    @property
+    def circumscribed_radius(self) -> float:
+        poly = self.footprint_polygon()
+        return self.robot_radius if poly is None else footprint_radii(poly)[1]
+
+
+def local_costmap_options(**overrides: object) -> CostmapOptions:
+    """Nav2's local costmap defaults: 3 x 3 m rolling window, no static layer, unknown as free."""
+    base: dict[str, object] = {
+        "rolling_window": True,
+        "use_static_layer": False,
+        "track_unknown_space": False,
+    }
+    base.update(overrides)
+    return CostmapOptions(**base)  # type: ignore[arg-type]
+
+
+class Costmap2D:
+    """A layered costmap over a fixed or rolling grid. See the module docstring."""
+
+    def __init__(
+        self,
+        geometry: GridGeometry,
+        options: CostmapOptions | None = None,
+        static_map: OccupancyGrid | None = None,
+    ) -> None:
+        self.options = o = options or CostmapOptions()
+        if geometry.width <= 0 or geometry.height <= 0 or geometry.resolution <= 0:
+            raise CostmapError(f"invalid costmap geometry {geometry}")
+        self.geometry = geometry
+        self._static_full: np.ndarray | None = None
+        self._static_geometry: GridGeometry | None = None
+        if o.use_static_layer and static_map is not None:
+            self._static_full = static_costs(
+                static_map, o.static_layer, track_unknown_space=o.track_unknown_space
+            )
+            self._static_geometry = static_map.geometry
+        self._obstacles = (
+            ObstacleLayer(geometry, o.obstacle_layer, track_unknown_space=o.track_unknown_space)
+            if o.use_obstacle_layer
+            else None
+        )
+        self._inflation_cells = cell_inflation_radius(geometry.resolution, o.inflation_layer)
+        self._base = self._static_window()
+        self._master = np.empty_like(self._base)
+        self._dirty: Bounds | None = (0, geometry.height, 0, geometry.width)
+
+    # ----------------------------------------------------------------- construction
+    @classmethod
+    def from_map(cls, static_map: OccupancyGrid, options: CostmapOptions | None = None) -> Costmap2D:
+        """A global costmap with the map's geometry."""
+        o = options or CostmapOptions()
+        if o.rolling_window:
+            raise CostmapError("a global costmap built from a map cannot be a rolling window")
+        return cls(static_map.geometry, o, static_map)
+
+    @classmethod
+    def rolling(
+        cls,
+        options: CostmapOptions | None = None,
+        center: Pose2D | None = None,
+        static_map: OccupancyGrid | None = None,
+    ) -> Costmap2D:
+        """A local rolling-window costmap centred on ``center`` (default the origin)."""
+        o = options or local_costmap_options()
+        if not o.rolling_window:
+            raise CostmapError("rolling() needs options with rolling_window=True")
+        w = round(o.width / o.resolution)
+        h = round(o.height / o.resolution)
+        if w <= 0 or h <= 0:
+            raise CostmapError(f"rolling window {o.width} x {o.height} m is empty")
+        geo = GridGeometry(o.resolution, w, h, cls._window_origin(o, w, h, center or Pose2D()))
+        return cls(geo, o, static_map)
+
+    @staticmethod
+    def _window_origin(o: CostmapOptions, w: int, h: int, center: Pose2D) -> Pose2D:
+        # Snap to whole cells (of the world grid) so shifting keeps cells aligned, as Nav2's updateMap.
+        res = o.resolution
+        ox = math.floor((center.x - 0.5 * w * res) / res) * res
+        oy = math.floor((center.y - 0.5 * h * res) / res) * res
+        return Pose2D(ox, oy, 0.0)
+
+    def _static_window(self) -> np.ndarray:
+        geo = self.geometry
+        if self._static_full is None or self._static_geometry is None:
+            fill = NO_INFORMATION if self.options.track_unknown_space else FREE_SPACE
+            return np.full((geo.height, geo.width), fill, dtype=np.uint8)
+        if self._static_geometry == geo:
+            return self._static_full
+        return sample_costs(self._static_full, self._static_geometry, geo)
+
+    # ----------------------------------------------------------------- updates
+    def update(
+        self,
+        robot_pose: Pose2D,
+        scan_points_world: np.ndarray | None = None,
+        sensor_origin: np.ndarray | tuple[float, float] | None = None,
+        *,
+        no_return_points_world: np.ndarray | None = None,
+    ) -> None:
+        """One cycle: move the window (rolling), clear and mark the scan, then clear the footprint.
+
+        ``scan_points_world``: (N, 2) lidar returns in the costmap's frame; ``sensor_origin``: the
+        laser position (default the robot position); ``no_return_points_world``: optional far ends
+        of beams without a return, used only for clearing.
+        """
+        o = self.options
+        if o.rolling_window:
+            self._move_window(robot_pose)
+        if self._obstacles is None:
+            return
+        if scan_points_world is not None or no_return_points_world is not None:
+            origin = (
+                np.array([robot_pose.x, robot_pose.y]) if sensor_origin is None else np.asarray(sensor_origin)
+            )
+            pts = np.zeros((0, 2)) if scan_points_world is None else scan_points_world
+            self._dirty = _union(self._dirty, self._obstacles.update(pts, origin, no_return_points_world))
+        if o.obstacle_layer.footprint_clearing_enabled:
+            # After marking, as Nav2's ObstacleLayer::updateCosts: returns off the robot's own body
+            # (or noise inside it) never become obstacles.
+            poly = o.footprint_polygon()
+            if poly is None:
+                poly = circle_footprint(o.robot_radius)
+            rows, cols = cells_in_polygon(self.geometry, robot_pose.transform_points(poly))
+            self._dirty = _union(self._dirty, self._obstacles.clear_cells(rows, cols))
+
+    def update_from_scan(
+        self, robot_pose: Pose2D, scan: LaserScan, laser_offset: Pose2D | None = None
+    ) -> None:
+        """``update`` from a ``LaserScan``: valid returns mark and clear; beams with no return
+        (``+inf``, REP-117) clear up to ``raytrace_max_range`` without marking, like Nav2 with
+        ``inf_is_valid``; NaN and out-of-range readings are dropped. ``laser_offset`` is the laser's
+        pose in base_link (default: at the robot's origin)."""
+        laser = robot_pose.compose(laser_offset) if laser_offset is not None else robot_pose
+        r = scan.ranges
+        a = scan.angles
+        valid = scan.valid_mask()
+        no_return = np.isposinf(r)
+        reach = self.options.obstacle_layer.raytrace_max_range
+        hits = np.column_stack((r[valid] * np.cos(a[valid]), r[valid] * np.sin(a[valid])))
+        far = np.column_stack((reach * np.cos(a[no_return]), reach * np.sin(a[no_return])))
+        self.update(
+            robot_pose,
+            laser.transform_points(hits),
+            np.array([laser.x, laser.y]),
+            no_return_points_world=laser.transform_points(far) if far.shape[0] else None,
+        )
+
+    def _move_window(self, robot_pose: Pose2D) -> None:
+        geo = self.geometry
+        origin = self._window_origin(self.options, geo.width, geo.height, robot_pose)
+        if abs(origin.x - geo.origin.x) < 1e-9 and abs(origin.y - geo.origin.y) < 1e-9:
+            return
+        new_geo = GridGeometry(geo.resolution, geo.width, geo.height, origin)
+        if self._obstacles is not None:
+            self._obstacles.set_geometry(new_geo)
+        self.geometry = new_geo
+        self._base = self._static_window()
+        self._dirty = (0, geo.height, 0, geo.width)
+
+    def clear(self) -> None:
+        """Reset the obstacle layer (Nav2 ``clearEntireCostmap`` / the ClearCostmap behaviour)."""
+        if self._obstacles is not None:
+            self._obstacles.reset()
+        self._dirty = (0, self.geometry.height, 0, self.geometry.width)
+
+    # ----------------------------------------------------------------- outputs
+    def _refresh(self) -> None:
+        if self._dirty is None:
+            return
+        geo = self.geometry
+        r = self._inflation_cells if self.options.use_inflation_layer else 0
+        r0, r1, c0, c1 = self._dirty
+        # Cells within r of a change may change; they depend on sources within 2r of it.
+        ir0, ir1, ic0, ic1 = max(r0 - r, 0), min(r1 + r, geo.height), max(c0 - r, 0), min(c1 + r, geo.width)
+        er0, er1, ec0, ec1 = (
+            max(r0 - 2 * r, 0),
+            min(r1 + 2 * r, geo.height),
+            max(c0 - 2 * r, 0),
+            min(c1 + 2 * r, geo.width),
+        )
+        combined = self._base[er0:er1, ec0:ec1].copy()
+        if self._obstacles is not None:
+            obs = self._obstacles.costs[er0:er1, ec0:ec1]
+            known = obs != NO_INFORMATION
+            take = known & ((combined == NO_INFORMATION) | (combined < obs))
+            combined[take] = obs[take]
+        if self.options.use_inflation_layer:
+            combined = inflate(
+                combined, geo.resolution, self.options.inscribed_radius, self.options.inflation_layer
+            )
+        self._master[ir0:ir1, ic0:ic1] = combined[ir0 - er0 : ir1 - er0, ic0 - ec0 : ic1 - ec0]
+        self._dirty = None
+
+    def costmap(self) -> Costmap:
+        """An independent snapshot of the master grid as ``nav.types.Costmap``."""
+        self._refresh()
+        return Costmap(self.geometry, self._master.copy())
+
+    def cost_at(self, xy: np.ndarray) -> np.ndarray:
+        """Master costs at (N, 2) world points (255 off the grid)."""
+        self._refresh()
+        return Costmap(self.geometry, self._master).cost_at(xy)
+
+    def footprint_cost(self, poses: np.ndarray, footprint: np.ndarray | None = None) -> np.ndarray:
+        """Highest master cost of the footprint at each of (M, 3) poses as (M,) uint8; ``footprint``
+        defaults to the configured one (centre cell for a circular robot). See
+        ``nav.costmap.footprint.footprint_cost``."""
+        self._refresh()
+        fp = self.options.footprint_polygon() if footprint is None else footprint
+        return footprint_cost(Costmap(self.geometry, self._master), poses, fp)
+
+    @property
+    def obstacle_costs(self) -> np.ndarray | None:
+        """The obstacle layer's own grid (read-only view), for display and tests."""
+        if self._obstacles is None:
+            return None
+        v = self._obstacles.costs.view()
+        v.flags.writeable = False
+        return v
+
+
+LayeredCostmap = Costmap2D
+"""Nav2's name for the layer container; one class here."""
