@@ -1,0 +1,471 @@
+"""Trajectory critics, each scoring all K trajectories of a cycle in a few numpy expressions.
+
+Organised like Nav2 DWB's ``dwb_critics`` (Marder-Eppstein's ``base_local_planner`` lineage): a
+critic returns a cost per trajectory (lower is better) and a mask of trajectories it declares
+illegal (DWB's ``IllegalTrajectoryException``); the controller minimises sum(scale * cost) over the
+legal ones. Distances are in costmap cells, as in DWB, so its default scales keep their balance.
+
+Differences from DWB, and why:
+- PathDist / GoalDist measure Euclidean distance to the path (a KD-tree over the path resampled
+  every half cell) / to the local goal, instead of a breadth-first Manhattan distance through the
+  grid: no per-cell queue, and obstacles are already handled by the obstacle critics.
+- The alignment and distance critics are silenced once the robot is inside ``xy_goal_tolerance``
+  (DWB silences PathAlign/GoalAlign only within ``forward_point_distance``); otherwise they fight
+  RotateToGoal over the heading, the usual cause of DWB's oscillation at the goal.
+
+Fox et al. 1997's objective terms are critics too (FoxHeading, FoxClearance, FoxVelocity), as costs
+in [0, 1]: maximising alpha*heading + beta*dist + gamma*vel equals minimising these weighted costs.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Protocol
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from nav.control.footprint import CostWindow, FootprintModel
+from nav.control.options import DwaOptions
+from nav.control.trajectory import TrajectorySet
+from nav.types import INSCRIBED_INFLATED_OBSTACLE, Pose2D, Twist2D, wrap_angle
+
+
+@dataclass
+class CriticContext:
+    """Everything the critics of one cycle read. Costs and clearances are computed on first use."""
+
+    options: DwaOptions
+    pose: Pose2D
+    velocity: Twist2D
+    trajectories: TrajectorySet
+    window: CostWindow
+    footprint: FootprintModel
+    local_path: np.ndarray  # (M, 3) path ahead of the robot; its last pose is the local goal
+    goal: Pose2D  # last pose of the whole path
+    in_goal_window: bool  # latched: the robot has come within xy_goal_tolerance of the goal
+    resolution: float = field(init=False)
+
+    def __post_init__(self) -> None:
+        self.resolution = self.window.geometry.resolution
+
+    @property
+    def future(self) -> np.ndarray:
+        """(K, T-1, 3) simulated poses after the start pose (the start is where the robot is
+        already; excluding it lets a robot whose centre sits in the inscribed zone drive out)."""
+        return self.trajectories.poses[:, 1:, :]
+
+    @property
+    def last(self) -> np.ndarray:
+        return self.trajectories.poses[:, -1, :]
+
+    @property
+    def local_goal(self) -> np.ndarray:
+        return self.local_path[-1]
+
+    @cached_property
+    def centre_costs(self) -> np.ndarray:
+        return self.window.centre_costs(self.future)
+
+    @cached_property
+    def path_tree(self) -> cKDTree:
+        """KD-tree of the local path resampled every half cell: distance queries to the path are
+        then exact to a quarter cell (DWB itself measures in whole cells)."""
+        xy = self.local_path[:, :2]
+        if xy.shape[0] > 1:
+            seg = np.hypot(*np.diff(xy, axis=0).T)
+            s = np.concatenate(([0.0], np.cumsum(seg)))
+            n = max(int(s[-1] / (0.5 * self.resolution)) + 1, 2)
+            si = np.linspace(0.0, s[-1], n)
+            xy = np.column_stack((np.interp(si, s, xy[:, 0]), np.interp(si, s, xy[:, 1])))
+        return cKDTree(xy)
+
+    def path_distance(self, points: np.ndarray) -> np.ndarray:
+        """Distance (m) from (N, 2) points to the local path."""
+        d, _ = self.path_tree.query(points)
+        return np.asarray(d, dtype=np.float64)
+
+    @cached_property
+    def footprint_lethal(self) -> np.ndarray:
+        """(K, T-1) whether the footprint touches a lethal cell at each future pose."""
+        return self.window.footprint_lethal(self.future, self.footprint)
+
+    @cached_property
+    def last_footprint_costs(self) -> np.ndarray:
+        """(K,) max cost under the footprint at each trajectory's last pose."""
+        return self.window.footprint_costs(self.last, self.footprint)
+
+    @cached_property
+    def clearance(self) -> np.ndarray:
+        return self.window.clearance(self.trajectories.poses)
+
+    def forward_points(self, poses: np.ndarray, distance: float) -> np.ndarray:
+        return poses[:, :2] + distance * np.column_stack((np.cos(poses[:, 2]), np.sin(poses[:, 2])))
+
+    def robot_to_goal(self) -> float:
+        return math.hypot(self.pose.x - self.goal.x, self.pose.y - self.goal.y)
+
+
+class Critic(Protocol):
+    """One DWB critic. ``score`` returns (cost (K,), illegal (K,) bool)."""
+
+    name: str
+
+    def weight(self, ctx: CriticContext) -> float: ...
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]: ...
+    def debrief(self, cmd: Twist2D, pose: Pose2D) -> None: ...
+    def reset(self) -> None: ...
+
+
+class _Stateless:
+    name = ""
+    scale = 1.0
+
+    def __init__(self, options: DwaOptions) -> None:
+        self.options = options
+
+    def weight(self, ctx: CriticContext) -> float:
+        return self.scale
+
+    def debrief(self, cmd: Twist2D, pose: Pose2D) -> None:
+        return None
+
+    def reset(self) -> None:
+        return None
+
+    @staticmethod
+    def _legal(k: int) -> np.ndarray:
+        return np.zeros(k, dtype=bool)
+
+
+class BaseObstacle(_Stateless):
+    """Cost of the cell under the robot's centre (last pose, or summed); a centre in a lethal,
+    inscribed (or unknown-as-lethal) cell makes the trajectory illegal. DWB ``BaseObstacleCritic``."""
+
+    name = "BaseObstacle"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.base_obstacle_scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        c = ctx.centre_costs.astype(np.float64)
+        illegal = np.any(c >= INSCRIBED_INFLATED_OBSTACLE, axis=1)
+        cost = c.sum(axis=1) if self.options.base_obstacle_sum_scores else c[:, -1]
+        return cost, illegal
+
+
+class ObstacleFootprint(_Stateless):
+    """Max cost under the footprint (last pose); a footprint touching a lethal cell anywhere along
+    the trajectory makes it illegal. DWB ``ObstacleFootprintCritic``."""
+
+    name = "ObstacleFootprint"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.obstacle_footprint_scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        illegal = np.any(ctx.footprint_lethal, axis=1)
+        return ctx.last_footprint_costs.astype(np.float64), illegal
+
+
+class PathDist(_Stateless):
+    """Distance (cells) from the trajectory's end to the path. DWB ``PathDistCritic``."""
+
+    name = "PathDist"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.path_dist_scale
+
+    def weight(self, ctx: CriticContext) -> float:
+        return 0.0 if ctx.in_goal_window else self.scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        d = ctx.path_distance(ctx.last[:, :2]) / ctx.resolution
+        return d, self._legal(d.shape[0])
+
+
+class PathAlign(_Stateless):
+    """Distance (cells) from a point ``forward_point_distance`` ahead of the trajectory's end to
+    the path: rewards facing along the path. DWB ``PathAlignCritic``; off near the goal."""
+
+    name = "PathAlign"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.path_align_scale
+        self.forward = options.path_align_forward_point_distance
+
+    def weight(self, ctx: CriticContext) -> float:
+        if ctx.in_goal_window or ctx.robot_to_goal() <= self.forward:
+            return 0.0
+        return self.scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        p = ctx.forward_points(ctx.last, self.forward)
+        d = ctx.path_distance(p) / ctx.resolution
+        return d, self._legal(d.shape[0])
+
+
+class GoalDist(_Stateless):
+    """Distance (cells) from the trajectory's end to the local goal (the end of the path segment
+    the controller sees). DWB ``GoalDistCritic``."""
+
+    name = "GoalDist"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.goal_dist_scale
+
+    def weight(self, ctx: CriticContext) -> float:
+        return 0.0 if ctx.in_goal_window else self.scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        g = ctx.local_goal
+        d = np.hypot(ctx.last[:, 0] - g[0], ctx.last[:, 1] - g[1]) / ctx.resolution
+        return d, self._legal(d.shape[0])
+
+
+class GoalAlign(_Stateless):
+    """Distance (cells) from the forward point of the trajectory's end to the local goal: rewards
+    facing the goal. DWB ``GoalAlignCritic``; off near the goal."""
+
+    name = "GoalAlign"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.goal_align_scale
+        self.forward = options.goal_align_forward_point_distance
+
+    def weight(self, ctx: CriticContext) -> float:
+        if ctx.in_goal_window or ctx.robot_to_goal() <= self.forward:
+            return 0.0
+        return self.scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        p = ctx.forward_points(ctx.last, self.forward)
+        g = ctx.local_goal
+        d = np.hypot(p[:, 0] - g[0], p[:, 1] - g[1]) / ctx.resolution
+        return d, self._legal(d.shape[0])
+
+
+class RotateToGoal(_Stateless):
+    """Inside ``xy_goal_tolerance``: first slow down (speeding up is illegal, cost =
+    slowing_factor * speed^2 + heading error), then, once stopped, only pure rotations (or, while the
+    window cannot reach zero speed, the slowest samples) are legal and the cost is |yaw error| at the
+    trajectory's end. DWB ``RotateToGoalCritic``."""
+
+    name = "RotateToGoal"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.rotate_to_goal_scale
+        self.rotating = False
+
+    def reset(self) -> None:
+        self.rotating = False
+
+    def _yaw_error(self, ctx: CriticContext) -> np.ndarray:
+        la = self.options.rotate_to_goal_lookahead_time
+        tw = ctx.trajectories.twists
+        end_yaw = ctx.pose.theta + tw[:, 2] * la if la >= 0 else ctx.last[:, 2]
+        return np.abs(wrap_angle(ctx.goal.theta - end_yaw))
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        tw = ctx.trajectories.twists
+        k = tw.shape[0]
+        if not ctx.in_goal_window:
+            return np.zeros(k), self._legal(k)
+        cur_sq = ctx.velocity.vx**2 + ctx.velocity.vy**2
+        self.rotating = self.rotating or cur_sq <= self.options.trans_stopped_velocity**2
+        speed_sq = tw[:, 0] ** 2 + tw[:, 1] ** 2
+        if not self.rotating:
+            illegal = speed_sq >= cur_sq
+            return speed_sq * self.options.rotate_to_goal_slowing_factor + self._yaw_error(ctx), illegal
+        # DWB: any translation is illegal. When the dynamic window does not reach zero yet (a
+        # fast robot entering the window), allow only the slowest reachable translation instead of
+        # rejecting everything, so the robot brakes to a stop, then turns.
+        illegal = speed_sq > speed_sq.min() + 1e-12
+        return self._yaw_error(ctx), illegal
+
+
+class _Trend:
+    """Sign history of one command axis (DWB ``OscillationCritic::CommandTrend``)."""
+
+    def __init__(self) -> None:
+        self.reset()
+
+    def reset(self) -> None:
+        self.sign = 0
+        self.positive_only = False
+        self.negative_only = False
+
+    def update(self, v: float) -> bool:
+        flipped = False
+        if v < 0.0:
+            if self.sign > 0:
+                self.negative_only = flipped = True
+            self.sign = -1
+        elif v > 0.0:
+            if self.sign < 0:
+                self.positive_only = flipped = True
+            self.sign = 1
+        return flipped
+
+    def oscillating(self, v: np.ndarray) -> np.ndarray:
+        return (self.positive_only & (v < 0.0)) | (self.negative_only & (v > 0.0))
+
+    @property
+    def flipped(self) -> bool:
+        return self.positive_only or self.negative_only
+
+
+class Oscillation:
+    """After a command axis changes sign, commands of the old sign are illegal until the robot has
+    moved ``oscillation_reset_dist`` or turned ``oscillation_reset_angle`` (or
+    ``oscillation_reset_time`` passed). y and theta trends only update while |vx| is below
+    ``x_only_threshold``. DWB ``OscillationCritic``."""
+
+    name = "Oscillation"
+
+    def __init__(self, options: DwaOptions) -> None:
+        self.options = options
+        self.scale = options.oscillation_scale
+        self.x, self.y, self.theta = _Trend(), _Trend(), _Trend()
+        self.anchor: Pose2D | None = None
+        self.anchor_cycles = 0
+
+    def weight(self, ctx: CriticContext) -> float:
+        return self.scale
+
+    def reset(self) -> None:
+        for t in (self.x, self.y, self.theta):
+            t.reset()
+        self.anchor = None
+        self.anchor_cycles = 0
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        tw = ctx.trajectories.twists
+        illegal = (
+            self.x.oscillating(tw[:, 0]) | self.y.oscillating(tw[:, 1]) | self.theta.oscillating(tw[:, 2])
+        )
+        return np.zeros(tw.shape[0]), illegal
+
+    def debrief(self, cmd: Twist2D, pose: Pose2D) -> None:
+        o = self.options
+        flagged = self.x.update(cmd.vx)
+        if abs(cmd.vx) <= o.oscillation_x_only_threshold:
+            flagged |= self.y.update(cmd.vy)
+            flagged |= self.theta.update(cmd.wz)
+        if flagged:
+            self.anchor, self.anchor_cycles = pose, 0
+            return
+        self.anchor_cycles += 1
+        if self.anchor is None or not (self.x.flipped or self.y.flipped or self.theta.flipped):
+            return
+        moved = pose.distance_to(self.anchor) > o.oscillation_reset_dist
+        turned = abs(float(wrap_angle(pose.theta - self.anchor.theta))) > o.oscillation_reset_angle
+        timed = o.oscillation_reset_time >= 0 and self.anchor_cycles * o.sim_period > o.oscillation_reset_time
+        if moved or turned or timed:
+            self.reset()
+
+
+class FoxHeading(_Stateless):
+    """Fox's heading term as a cost: |angle between the end pose's heading and the direction to a
+    carrot ``fox_heading_lookahead`` m along the path| / pi (Fox: heading = 180 deg - that angle,
+    maximised). A short carrot (source C's 0.5 m local look-ahead) keeps the robot on a path that
+    bends round obstacles instead of aiming at a goal behind them, Fox's local minimum."""
+
+    name = "FoxHeading"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.fox_heading_scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        path = ctx.local_path
+        seg = np.hypot(*np.diff(path[:, :2], axis=0).T)
+        along = np.concatenate(([0.0], np.cumsum(seg)))
+        i = min(int(np.searchsorted(along, self.options.fox_heading_lookahead)), len(path) - 1)
+        g, last = path[i], ctx.last
+        bearing = np.arctan2(g[1] - last[:, 1], g[0] - last[:, 0])
+        err = np.abs(wrap_angle(bearing - last[:, 2])) / math.pi
+        return err, self._legal(err.shape[0])
+
+
+class FoxClearance(_Stateless):
+    """Fox's dist term as a cost, 1 - min(clearance, cap)/cap (clearance: smallest distance from
+    the arc to a lethal cell minus the inscribed radius), and Fox's admissible velocities
+    V_a = {v <= sqrt(2 dist(v,w) |decel_x|), w <= sqrt(2 turn(v,w) |decel_theta|)}, with dist / turn
+    the distance / angle travelled along the arc before the footprint would touch an obstacle.
+
+    Unlike ObstacleFootprint this does not reject an arc that hits something late in the horizon if
+    the robot could still brake before it: Fox's semantics, where only the next period is executed.
+    """
+
+    name = "FoxClearance"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.fox_clearance_scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        o = self.options
+        cap = o.fox_clearance_max
+        clear = ctx.clearance - o.inscribed_radius  # (K, T)
+        cost = 1.0 - np.clip(clear.min(axis=1), 0.0, cap) / cap
+        tw = ctx.trajectories.twists
+        hit = ctx.footprint_lethal  # (K, T-1), aligned with times[1:]
+        any_hit = hit.any(axis=1)
+        # time of the last collision-free pose before the first hit (conservative: the contact lies
+        # somewhere between it and the next sample); meaningful where any_hit
+        t_hit = ctx.trajectories.times[:-1][np.argmax(hit, axis=1)]
+        speed = np.hypot(tw[:, 0], tw[:, 1])
+        dist = speed * t_hit
+        turn = np.abs(tw[:, 2]) * t_hit
+        bad_v = any_hit & (speed > np.sqrt(2.0 * dist * abs(o.decel_lim_x)))
+        bad_w = any_hit & (np.abs(tw[:, 2]) > np.sqrt(2.0 * turn * abs(o.decel_lim_theta)))
+        return cost, bad_v | bad_w
+
+
+class FoxVelocity(_Stateless):
+    """Fox's vel term as a cost: 1 - speed / max speed (progress is rewarded)."""
+
+    name = "FoxVelocity"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.fox_velocity_scale
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        tw = ctx.trajectories.twists
+        vmax = max(self.options.max_speed_xy, self.options.max_vel_x, 1e-9)
+        cost = 1.0 - np.clip(np.hypot(tw[:, 0], tw[:, 1]) / vmax, 0.0, 1.0)
+        return cost, self._legal(cost.shape[0])
+
+
+CRITIC_TYPES: dict[str, type] = {
+    c.name: c
+    for c in (
+        BaseObstacle,
+        ObstacleFootprint,
+        PathDist,
+        PathAlign,
+        GoalDist,
+        GoalAlign,
+        RotateToGoal,
+        Oscillation,
+        FoxHeading,
+        FoxClearance,
+        FoxVelocity,
+    )
+}
+
+
+def make_critics(options: DwaOptions) -> list[Critic]:
+    """Instantiate ``options.critics`` in order."""
+    return [CRITIC_TYPES[name](options) for name in options.critics]

@@ -1,0 +1,193 @@
+"""Footprint costs along many trajectories without a per-pose rasterisation.
+
+Nav2's ``ObstacleFootprintCritic`` rasterises the footprint's edges for every pose. Here the filled
+footprint is rasterised once per heading bin into a list of cell offsets (the union over the bin's
+heading range, so it is conservative in heading), and a pose's footprint cost is one fancy-indexed
+gather of those offsets around the pose's cell (poses snap to their cell: error <= half a cell, the
+planner's own discretisation). For the "does it touch a lethal cell" test, the Euclidean distance
+transform of the lethal cells first clears every pose farther than the circumscribed radius from
+any obstacle, so only the few poses near obstacles are gathered. A round robot needs one bin, and
+its collision test is the distance transform alone.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, Costmap, GridGeometry, Pose2D
+
+
+def _inside_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
+    """Even-odd point-in-polygon test for (N, 2) points (vectorized over points, loop over edges)."""
+    x, y = pts[:, 0], pts[:, 1]
+    inside = np.zeros(pts.shape[0], dtype=bool)
+    for (x0, y0), (x1, y1) in zip(poly, np.roll(poly, -1, axis=0), strict=True):
+        crosses = (y0 > y) != (y1 > y)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            x_at = x0 + (y - y0) * (x1 - x0) / (y1 - y0)
+        inside ^= crosses & (x < x_at)
+    return inside
+
+
+def rasterize(polygon: np.ndarray, resolution: float, angles: np.ndarray) -> np.ndarray:
+    """(P, 2) integer (row, col) offsets, relative to the pose's cell, of the cells the polygon
+    covers at any of ``angles``: cell centres inside it, plus cells its densely sampled edges cross."""
+    radius = float(np.max(np.hypot(polygon[:, 0], polygon[:, 1])))
+    r = math.ceil(radius / resolution) + 1
+    idx = np.arange(-r, r + 1)
+    rows, cols = np.meshgrid(idx, idx, indexing="ij")
+    centres = np.column_stack((cols.ravel() * resolution, rows.ravel() * resolution))
+    mask = np.zeros((2 * r + 1, 2 * r + 1), dtype=bool)
+    ends = np.roll(polygon, -1, axis=0)
+    n = max(math.ceil(float(np.max(np.hypot(*(ends - polygon).T))) / (resolution / 4.0)), 1)
+    f = np.linspace(0.0, 1.0, n + 1)[None, :, None]
+    boundary = (polygon[:, None, :] * (1 - f) + ends[:, None, :] * f).reshape(-1, 2)
+    for a in angles:
+        c, s = math.cos(a), math.sin(a)
+        rot = np.array([[c, -s], [s, c]])
+        mask |= _inside_polygon(centres, polygon @ rot.T).reshape(mask.shape)
+        b = boundary @ rot.T
+        mask[np.rint(b[:, 1] / resolution).astype(int) + r, np.rint(b[:, 0] / resolution).astype(int) + r] = (
+            True
+        )
+    rr, cc = np.nonzero(mask)
+    return np.column_stack((rr - r, cc - r))
+
+
+@dataclass(frozen=True)
+class FootprintModel:
+    """The footprint rasterised for ``bins`` headings at one costmap resolution."""
+
+    resolution: float
+    offsets: np.ndarray  # (B, P, 2) (row, col) offsets per heading bin, padded by repeating (0, 0)
+    circumscribed: float  # m
+    round: bool = False  # a circle: collision tests use the distance transform alone
+
+    @property
+    def bins(self) -> int:
+        return int(self.offsets.shape[0])
+
+    @staticmethod
+    def build(polygon: np.ndarray, resolution: float, bins: int, round_robot: bool) -> FootprintModel:
+        bins = 1 if round_robot else max(int(bins), 1)
+        width = 2.0 * math.pi / bins
+        per_bin = []
+        for b in range(bins):
+            angles = b * width + np.linspace(-0.5 * width, 0.5 * width, 5) if bins > 1 else np.zeros(1)
+            per_bin.append(rasterize(polygon, resolution, angles))
+        p = max(len(o) for o in per_bin)
+        offsets = np.zeros((bins, p, 2), dtype=np.int64)
+        for b, o in enumerate(per_bin):
+            offsets[b, : len(o)] = o
+        radius = float(np.max(np.hypot(polygon[:, 0], polygon[:, 1])))
+        return FootprintModel(resolution, offsets, radius, round_robot)
+
+
+@dataclass(frozen=True)
+class CostWindow:
+    """A crop of the costmap covering every trajectory plus a margin (>= the footprint's radius),
+    with NO_INFORMATION mapped per ``unknown_is_lethal`` and everything off the costmap lethal."""
+
+    costs: np.ndarray  # (H, W) uint8
+    geometry: GridGeometry  # geometry of the crop (origin shifted, same resolution and rotation)
+
+    @staticmethod
+    def around(costmap: Costmap, xy: np.ndarray, margin: float, unknown_is_lethal: bool) -> CostWindow:
+        """Crop ``costmap`` to the bounding box of points ``xy`` (..., 2+) grown by ``margin`` metres."""
+        g = costmap.geometry
+        x0, x1 = float(xy[..., 0].min()), float(xy[..., 0].max())
+        y0, y1 = float(xy[..., 1].min()), float(xy[..., 1].max())
+        corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
+        rows, cols = g.world_to_cell(corners)  # bounding box of the points, in cells
+        m = math.ceil(margin / g.resolution) + 2
+        r0, r1 = int(rows.min()) - m, int(rows.max()) + m + 1
+        c0, c1 = int(cols.min()) - m, int(cols.max()) + m + 1
+        out = np.full((r1 - r0, c1 - c0), LETHAL_OBSTACLE, dtype=np.uint8)
+        sr0, sr1 = max(r0, 0), min(r1, g.height)
+        sc0, sc1 = max(c0, 0), min(c1, g.width)
+        if sr1 > sr0 and sc1 > sc0:
+            out[sr0 - r0 : sr1 - r0, sc0 - c0 : sc1 - c0] = costmap.costs[sr0:sr1, sc0:sc1]
+        unknown = out == NO_INFORMATION
+        if unknown.any():
+            out[unknown] = LETHAL_OBSTACLE if unknown_is_lethal else 0
+        origin = g.origin.compose(Pose2D(c0 * g.resolution, r0 * g.resolution, 0.0))
+        return CostWindow(out, GridGeometry(g.resolution, c1 - c0, r1 - r0, origin))
+
+    def cells(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Row/col in this window of (..., 2+) poses (clipped: only guards rounding at the border)."""
+        g = self.geometry
+        h, w = self.costs.shape
+        if g.origin.theta == 0.0:  # the usual axis-aligned costmap: no rotation, no reshaping
+            inv = 1.0 / g.resolution
+            cols = np.floor((poses[..., 0] - g.origin.x) * inv).astype(np.intp)
+            rows = np.floor((poses[..., 1] - g.origin.y) * inv).astype(np.intp)
+        else:
+            rows, cols = g.world_to_cell(poses[..., :2].reshape(-1, 2))
+            rows, cols = rows.reshape(poses.shape[:-1]), cols.reshape(poses.shape[:-1])
+        np.clip(rows, 0, h - 1, out=rows)
+        np.clip(cols, 0, w - 1, out=cols)
+        return rows, cols
+
+    def centre_costs(self, poses: np.ndarray) -> np.ndarray:
+        """Cost of the cell under each pose's centre, shape ``poses.shape[:-1]``."""
+        rows, cols = self.cells(poses)
+        return self.costs[rows, cols]
+
+    def _gather(
+        self, rows: np.ndarray, cols: np.ndarray, theta: np.ndarray, model: FootprintModel
+    ) -> np.ndarray:
+        """(N,) max cost under the footprint at flat (N,) cells and headings."""
+        if model.bins == 1:
+            off = model.offsets[0][None]
+        else:
+            b = np.rint((theta - self.geometry.origin.theta) / (2.0 * math.pi / model.bins)).astype(np.int64)
+            off = model.offsets[b % model.bins]  # (N, P, 2)
+        # no clipping needed: ``around`` pads the crop by more than the footprint's reach
+        return self.costs[rows[:, None] + off[..., 0], cols[:, None] + off[..., 1]].max(axis=1)
+
+    def footprint_costs(self, poses: np.ndarray, model: FootprintModel) -> np.ndarray:
+        """Max cost under the footprint at each pose, shape ``poses.shape[:-1]``."""
+        rows, cols = self.cells(poses)
+        if model.round:  # one max filter with the disc, then a plain lookup
+            off = model.offsets[0]
+            r = int(np.abs(off).max())
+            disc = np.zeros((2 * r + 1, 2 * r + 1), dtype=bool)
+            disc[off[:, 0] + r, off[:, 1] + r] = True
+            filtered = ndimage.maximum_filter(self.costs, footprint=disc, mode="nearest")
+            return filtered[rows, cols]
+        flat = self._gather(rows.ravel(), cols.ravel(), poses[..., 2].ravel(), model)
+        return flat.reshape(poses.shape[:-1])
+
+    def lethal_distance(self) -> np.ndarray:
+        """(H, W) Euclidean distance (m) from each cell centre to the nearest lethal cell centre."""
+        return ndimage.distance_transform_edt(self.costs < LETHAL_OBSTACLE) * self.geometry.resolution
+
+    def footprint_lethal(self, poses: np.ndarray, model: FootprintModel) -> np.ndarray:
+        """Whether the footprint touches a lethal cell at each pose, shape ``poses.shape[:-1]``.
+
+        Round robots: the distance transform answers directly (a lethal cell centre within the
+        radius). Polygons: poses farther than the circumscribed radius (+ the rasterisation's reach)
+        from every lethal cell are clear without a gather; only the rest are gathered."""
+        rows, cols = self.cells(poses)
+        dist = self.lethal_distance()[rows, cols]
+        if model.round:
+            return dist <= model.circumscribed
+        rows, cols, dist = rows.ravel(), cols.ravel(), dist.ravel()
+        near = np.flatnonzero(dist <= model.circumscribed + 0.75 * self.geometry.resolution)
+        out = np.zeros(rows.shape[0], dtype=bool)
+        if near.size:
+            theta = poses[..., 2].ravel()[near]
+            out[near] = self._gather(rows[near], cols[near], theta, model) >= LETHAL_OBSTACLE
+        return out.reshape(poses.shape[:-1])
+
+    def clearance(self, poses: np.ndarray) -> np.ndarray:
+        """Distance (m) from each pose's cell to the nearest lethal cell, shape ``poses.shape[:-1]``."""
+        rows, cols = self.cells(poses)
+        return self.lethal_distance()[rows, cols]
+
+
+__all__ = ["CostWindow", "FootprintModel", "rasterize"]

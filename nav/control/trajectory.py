@@ -1,0 +1,142 @@
+"""Velocity sampling over the dynamic window and arc simulation of every sample at once.
+
+Fox, Burgard & Thrun, "The Dynamic Window Approach to Collision Avoidance", IEEE RAM 1997:
+the search space is the set of velocities reachable from the current one within one control
+period under the acceleration limits (the *dynamic window* V_d), each simulated as a circular arc
+(constant (v, w)). The layout is Nav2 DWB's: ``XYThetaIterator`` samples ``vx_samples`` x
+``vy_samples`` x ``vtheta_samples`` twists (zero is added on an axis whose window contains it,
+like DWB's ``OneDVelocityIterator``), invalid speeds are dropped like ``isValidSpeed``, and poses are
+spaced by ``linear_granularity`` / ``angular_granularity`` like ``StandardTrajectoryGenerator``.
+
+All K trajectories share one time grid (the finest any of them needs) so they form one
+(K, T, 3) array; the arcs are integrated in closed form rather than with DWB's Euler steps.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nav.control.options import DwaOptions
+from nav.types import Pose2D, Twist2D
+
+
+def window_1d(
+    v0: float, v_min: float, v_max: float, acc: float, decel: float, dt: float, samples: int
+) -> np.ndarray:
+    """Velocities sampled in [v0 - decel*dt, v0 + acc*dt] ∩ [v_min, v_max] (Fox's V_d ∩ V_s).
+
+    ``acc`` (>= 0) applies when speeding up, ``|decel|`` when slowing towards zero, as DWB's
+    ``projectVelocity``. Zero is added when inside the window so stopping or rotating in place is
+    always among the samples.
+    """
+    acc, dec = abs(acc), abs(decel)
+    up = acc if v0 >= 0 else dec  # rate available to increase v
+    down = dec if v0 > 0 else acc  # rate available to decrease v
+    hi = min(v_max, v0 + up * dt)
+    lo = max(v_min, v0 - down * dt)
+    if hi < lo:  # current velocity outside the limits: pull it back towards them
+        hi = lo = min(max(v0, v_min), v_max)
+    if samples <= 1 or hi - lo < 1e-12:
+        vals = np.array([0.5 * (lo + hi)])
+    else:
+        vals = np.linspace(lo, hi, samples)
+        vals[np.abs(vals) < 1e-12 * max(abs(lo), abs(hi), 1.0)] = 0.0  # linspace round-off near zero
+    if lo <= 0.0 <= hi:
+        vals = np.union1d(vals, [0.0])
+    return vals
+
+
+def sample_twists(options: DwaOptions, velocity: Twist2D) -> np.ndarray:
+    """(K, 3) twists (vx, vy, wz): the grid over the dynamic window, filtered like DWB's
+    ``XYThetaIterator::isValidSpeed`` (max_speed_xy, min_speed_xy/min_speed_theta, not all zero)."""
+    o = options
+    dt = o.sim_period
+    vx = window_1d(velocity.vx, o.min_vel_x, o.max_vel_x, o.acc_lim_x, o.decel_lim_x, dt, o.vx_samples)
+    if o.holonomic and (o.max_vel_y > o.min_vel_y):
+        vy = window_1d(velocity.vy, o.min_vel_y, o.max_vel_y, o.acc_lim_y, o.decel_lim_y, dt, o.vy_samples)
+    else:
+        vy = np.zeros(1)
+    wz = window_1d(
+        velocity.wz,
+        -o.max_vel_theta,
+        o.max_vel_theta,
+        o.acc_lim_theta,
+        o.decel_lim_theta,
+        dt,
+        o.vtheta_samples,
+    )
+    grid = np.stack(np.meshgrid(vx, vy, wz, indexing="ij"), axis=-1).reshape(-1, 3)
+    speed_sq = grid[:, 0] ** 2 + grid[:, 1] ** 2
+    ok = np.ones(grid.shape[0], dtype=bool)
+    if o.max_speed_xy > 0:
+        ok &= speed_sq <= o.max_speed_xy**2 + 1e-12
+    ok &= ~((speed_sq < o.min_speed_xy**2) & (np.abs(grid[:, 2]) < o.min_speed_theta))
+    ok &= ~((speed_sq == 0.0) & (grid[:, 2] == 0.0))
+    return grid[ok]
+
+
+def time_steps(options: DwaOptions, twists: np.ndarray) -> np.ndarray:
+    """Sample times (T,), from 0 to ``sim_time`` inclusive, fine enough for every twist."""
+    o = options
+    if o.discretize_by_time:
+        n = math.ceil(o.sim_time / o.time_granularity)
+    else:
+        lin = float(np.max(np.hypot(twists[:, 0], twists[:, 1]), initial=0.0)) * o.sim_time
+        ang = float(np.max(np.abs(twists[:, 2]), initial=0.0)) * o.sim_time
+        n = math.ceil(max(lin / o.linear_granularity, ang / o.angular_granularity))
+    n = int(min(max(n, 1), o.max_steps))
+    return np.linspace(0.0, o.sim_time, n + 1)
+
+
+def simulate_arcs(pose: Pose2D, twists: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """(K, T, 3) world poses of constant body twists (K, 3) from ``pose`` at ``times`` (T,).
+
+    Closed form of the holonomic unicycle (source C's kinematics, constant body velocity):
+    in the start frame x(t) = (vx sin wt - vy (1 - cos wt)) / w, y(t) = (vx (1 - cos wt) + vy sin wt) / w,
+    with the w -> 0 limits (t and w t^2 / 2) for straight-line samples.
+    """
+    vx = twists[:, 0:1]
+    vy = twists[:, 1:2]
+    w = twists[:, 2:3]
+    t = times[None, :]
+    a = w * t  # (K, T) heading change
+    small = np.abs(w[:, 0]) < 1e-9
+    inv_w = 1.0 / np.where(small[:, None], 1.0, w)
+    s = np.sin(a)
+    s *= inv_w  # sin(wt)/w
+    c = 1.0 - np.cos(a)
+    c *= inv_w  # (1 - cos wt)/w
+    if small.any():  # straight-line samples: the w -> 0 limits
+        s[small] = t
+        c[small] = 0.5 * a[small] * t
+    bx = vx * s - vy * c
+    by = vx * c + vy * s
+    c0, s0 = math.cos(pose.theta), math.sin(pose.theta)
+    out = np.empty((twists.shape[0], times.shape[0], 3))
+    out[..., 0] = pose.x + c0 * bx - s0 * by
+    out[..., 1] = pose.y + s0 * bx + c0 * by
+    out[..., 2] = pose.theta + a
+    return out
+
+
+@dataclass(frozen=True)
+class TrajectorySet:
+    """K sampled trajectories: ``twists`` (K, 3), ``times`` (T,), ``poses`` (K, T, 3) in the map
+    frame (headings unwrapped: pose.theta + wz * t)."""
+
+    twists: np.ndarray
+    times: np.ndarray
+    poses: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.twists.shape[0])
+
+
+def generate(options: DwaOptions, pose: Pose2D, velocity: Twist2D) -> TrajectorySet:
+    """Sample the dynamic window around ``velocity`` and simulate every sample from ``pose``."""
+    twists = sample_twists(options, velocity)
+    times = time_steps(options, twists)
+    return TrajectorySet(twists, times, simulate_arcs(pose, twists, times))

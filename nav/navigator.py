@@ -1,0 +1,497 @@
+"""Navigator: drive the robot through a queue of goal poses, one control-loop tick at a time.
+
+The logic of Nav2's ``bt_navigator`` default tree (NavigateToPose / NavigateThroughPoses) written
+as a plain state machine, because navdeck runs one control loop and no behaviour-tree engine:
+plan to the current goal, replan every ``replan_period`` (Nav2's ``RateController`` at 1 Hz) and at
+once when the remaining path is blocked (Nav2 ``IsPathValid``), let the controller follow the path,
+check the goal (``GoalChecker``) and progress (``ProgressChecker``), and report *why* it stopped.
+
+Pure logic, no threads and no clock of its own: ``tick(now, ...)`` is called by the control loop.
+Planning goes through ``plan_fn`` (synchronous, default ``planner.plan``) or, for a worker thread,
+through ``request_plan`` (called with a ``PlanRequest``) and ``deliver_plan`` (the result, or the
+planner's exception). Recovery behaviours live elsewhere: on controller failure or no progress the
+navigator enters ``STUCK`` with the reason, stops the robot, and waits for ``resume()`` (or fails
+after ``stuck_timeout``).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from typing import Any, Literal, Protocol
+
+import numpy as np
+
+from nav.control import Controller
+from nav.control.errors import ControllerError, NoValidControl, PatienceExceeded
+from nav.control.goal_checker import GoalChecker
+from nav.control.progress_checker import ProgressChecker
+from nav.planning.errors import NoValidPathFound, PlannerError
+from nav.types import LETHAL_OBSTACLE, ZERO_TWIST, Costmap, Path, Pose2D, Twist2D
+
+
+class GlobalPlanner(Protocol):
+    def plan(self, costmap: Costmap, start: Pose2D, goal: Pose2D) -> Path: ...
+
+
+PlanFn = Callable[[Costmap, Pose2D, Pose2D], Path]
+
+
+class NavState(StrEnum):
+    IDLE = "idle"
+    PLANNING = "planning"  # waiting for the first path to the current goal
+    FOLLOWING = "following"
+    STUCK = "stuck"  # stopped; recovery is needed (see NavFeedback.stuck_reason)
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+
+
+TERMINAL = frozenset({NavState.IDLE, NavState.SUCCEEDED, NavState.FAILED, NavState.CANCELLED})
+
+
+@dataclass(frozen=True)
+class NavigatorOptions:
+    """Options of :class:`Navigator`."""
+
+    replan_period: float = 1.0
+    """Seconds between periodic replans (1 / Nav2 ``planner_frequency``-style rate, 1 Hz in Nav2's
+    default tree); <= 0 plans only when needed."""
+    replan_on_blocked: bool = True
+    """Replan as soon as a lethal cell lies on the remaining path (Nav2 ``IsPathValid``)."""
+    blocked_check_distance: float = 2.0
+    """Length of remaining path (m) checked for lethal cells each tick."""
+    blocked_replan_period: float = 0.25
+    """Minimum seconds between replans triggered by a blocked path (keeps planning off every tick)."""
+    stuck_timeout: float = 10.0
+    """Seconds in STUCK without ``resume()`` or a fresh path before the goal fails; inf: never."""
+    nominal_speed: float = 0.26
+    """Speed used for the ETA before the robot has moved, m/s."""
+    speed_time_constant: float = 2.0
+    """Time constant (s) of the moving average of speed behind the ETA."""
+
+
+@dataclass(frozen=True)
+class PlanRequest:
+    """A planning job for a worker: call ``navigator.deliver_plan(request.id, path_or_error)``."""
+
+    id: int
+    costmap: Costmap
+    start: Pose2D
+    goal: Pose2D
+    goal_index: int
+    reason: str  # "new goal", "periodic", "blocked", "controller failed", "resume"
+
+
+@dataclass(frozen=True)
+class NavOutcome:
+    """How a navigation request ended; ``reason`` names the typed error (``NoValidPathFound``,
+    ``PatienceExceeded``, ``NoProgress``, ...) when it failed."""
+
+    kind: Literal["reached", "failed", "cancelled"]
+    reason: str = ""
+    message: str = ""
+    goals_reached: int = 0
+    error: BaseException | None = None
+
+
+@dataclass(frozen=True)
+class NavFeedback:
+    activity: str  # what it is doing, for people
+    goal_index: int
+    goal_count: int
+    goal: Pose2D | None
+    distance_remaining: float  # m, along the path, then straight between remaining waypoints
+    eta: float  # s
+    path: Path | None
+    trajectories: np.ndarray | None = None  # (K, T, 2) controller samples, for the 3D view
+    chosen: int = -1
+    stuck_reason: str = ""
+    time_without_progress: float = 0.0
+
+
+@dataclass(frozen=True)
+class NavTick:
+    cmd: Twist2D
+    state: NavState
+    feedback: NavFeedback
+    outcome: NavOutcome | None = None  # set on the tick the request ends
+
+
+@dataclass
+class _Goal:
+    goals: list[Pose2D] = field(default_factory=list)
+    index: int = 0
+
+
+class Navigator:
+    """Queue goals with ``set_goals``, call ``tick`` every control cycle, send ``NavTick.cmd``."""
+
+    def __init__(
+        self,
+        planner: GlobalPlanner | None,
+        controller: Controller,
+        goal_checker: GoalChecker,
+        progress_checker: ProgressChecker,
+        options: NavigatorOptions | None = None,
+        *,
+        plan_fn: PlanFn | None = None,
+        request_plan: Callable[[PlanRequest], None] | None = None,
+    ) -> None:
+        if plan_fn is None and request_plan is None:
+            if planner is None:
+                raise ValueError("Navigator needs a planner, a plan_fn or a request_plan callback")
+            plan_fn = planner.plan
+        self.controller = controller
+        self.goal_checker = goal_checker
+        self.progress_checker = progress_checker
+        self.options = options or NavigatorOptions()
+        self._plan_fn = plan_fn
+        self._request_plan = request_plan
+        self.state = NavState.IDLE
+        self.outcome: NavOutcome | None = None
+        self._q = _Goal()
+        self._path: Path | None = None
+        self._path_s = np.zeros(0)
+        self._pending: int | None = None
+        self._next_id = 0
+        self._last_plan_time = -math.inf
+        self._last_attempt_time = -math.inf
+        self._last_plan_error: PlannerError | None = None
+        self._stuck_reason = ""
+        self._stuck_error: BaseException | None = None
+        self._stuck_since = 0.0
+        self._cancel_requested = False
+        self._force_plan = ""
+        self._speed = self.options.nominal_speed
+        self._last_now: float | None = None
+        self._debug: Any = None
+        self._activity = "idle"
+
+    @classmethod
+    def for_robot(
+        cls,
+        profile: Any,
+        planner: GlobalPlanner | None,
+        options: NavigatorOptions | None = None,
+        *,
+        plan_fn: PlanFn | None = None,
+        request_plan: Callable[[PlanRequest], None] | None = None,
+        goal_checker: GoalChecker | None = None,
+        progress_checker: ProgressChecker | None = None,
+        **dwa_overrides: Any,
+    ) -> Navigator:
+        """A navigator with a DWA controller configured from a robot profile (duck-typed like
+        ``DwaOptions.for_robot``; ``dwa_overrides`` are DwaOptions fields) and Nav2's default goal
+        and progress checkers."""
+        from nav.control.dwa import DwaController
+        from nav.control.options import DwaOptions
+
+        controller = DwaController(DwaOptions.for_robot(profile, **dwa_overrides))
+        return cls(
+            planner,
+            controller,
+            goal_checker or GoalChecker(),
+            progress_checker or ProgressChecker(),
+            options,
+            plan_fn=plan_fn,
+            request_plan=request_plan,
+        )
+
+    # -- requests ---------------------------------------------------------------------------------
+    def set_goals(self, goals: Sequence[Pose2D]) -> None:
+        """Start navigating through ``goals`` in order (replaces any current request)."""
+        if not goals:
+            raise ValueError("set_goals needs at least one goal")
+        if not all(g.is_finite() for g in goals):
+            raise ValueError("goals must be finite poses")
+        self._q = _Goal(list(goals), 0)
+        self.outcome = None
+        self._cancel_requested = False
+        self._start_goal()
+
+    def cancel(self) -> None:
+        """Stop; the next tick reports the ``cancelled`` outcome."""
+        if self.state not in TERMINAL:
+            self._cancel_requested = True
+
+    def resume(self) -> None:
+        """Leave STUCK after a recovery behaviour: reset progress tracking and replan."""
+        if self.state == NavState.STUCK:
+            self._clear_stuck()
+            self.progress_checker.reset()
+            self._force_plan = "resume"
+
+    def deliver_plan(self, request_id: int, result: Path | BaseException) -> None:
+        """Hand in the result of a ``PlanRequest`` (a path, or the planner's exception). Call it
+        from the control-loop thread (e.g. when polling the worker's future before ``tick``).
+        Results of superseded requests are ignored; non-planner exceptions are re-raised."""
+        if request_id != self._pending:
+            return
+        self._pending = None
+        if isinstance(result, BaseException):
+            if not isinstance(result, PlannerError):
+                raise result
+            self._plan_failed(result)
+        else:
+            self._accept_plan(result)
+
+    @property
+    def path(self) -> Path | None:
+        return self._path
+
+    @property
+    def goals(self) -> list[Pose2D]:
+        return list(self._q.goals)
+
+    # -- the tick ---------------------------------------------------------------------------------
+    def tick(
+        self,
+        now: float,
+        pose: Pose2D,
+        velocity: Twist2D,
+        global_costmap: Costmap,
+        local_costmap: Costmap | None = None,
+    ) -> NavTick:
+        """Advance one control cycle and return the command to send."""
+        local = local_costmap if local_costmap is not None else global_costmap
+        self._now, self._pose, self._global = now, pose, global_costmap
+        self._update_speed(now, velocity)
+        self._debug = None
+        if self._cancel_requested:
+            self._cancel_requested = False
+            self._pending = None
+            return self._finish(NavOutcome("cancelled", goals_reached=self._q.index), NavState.CANCELLED)
+        if self.state in TERMINAL:
+            return self._tick(ZERO_TWIST)
+
+        goal = self._q.goals[self._q.index]
+        if self._path is not None and self.goal_checker.is_goal_reached(pose, goal, velocity):
+            self._q.index += 1
+            if self._q.index >= len(self._q.goals):
+                return self._finish(NavOutcome("reached", goals_reached=self._q.index), NavState.SUCCEEDED)
+            self._start_goal()
+            goal = self._q.goals[self._q.index]
+
+        self._maybe_plan(local)
+        if self.state in TERMINAL:  # planning failed with no path to fall back on
+            return self._tick(ZERO_TWIST, self.outcome)
+        if self._path is None:
+            self.state = NavState.PLANNING
+            self._activity = "waiting for a path" if self._pending is not None else "planning"
+            return self._tick(ZERO_TWIST)
+
+        if self.state == NavState.STUCK:
+            if now - self._stuck_since > self.options.stuck_timeout:
+                return self._fail(
+                    self._stuck_reason, str(self._stuck_error or self._stuck_reason), self._stuck_error
+                )
+            return self._tick(ZERO_TWIST)
+
+        if not self.progress_checker.check(pose, now):
+            allowance = self.progress_checker.options.movement_time_allowance
+            return self._stuck("NoProgress", f"moved less than the required radius in {allowance:g} s", None)
+
+        try:
+            cmd, self._debug = self.controller.compute(pose, velocity, local)
+        except PatienceExceeded as exc:
+            return self._stuck(type(exc).__name__, str(exc), exc)
+        except NoValidControl:
+            # stop for this cycle and look for another way (Nav2 retries with a fresh path too)
+            self._debug = getattr(self.controller, "last_debug", None)
+            self._activity = "no safe trajectory: stopping"
+            if now - self._last_attempt_time >= self.options.blocked_replan_period:
+                self._force_plan = "controller failed"
+            self.state = NavState.FOLLOWING
+            return self._tick(ZERO_TWIST)
+        except ControllerError as exc:
+            return self._fail(type(exc).__name__, str(exc), exc)
+        self.state = NavState.FOLLOWING
+        in_window = bool(getattr(self._debug, "in_goal_window", False))
+        self._activity = (
+            "turning to the goal heading" if in_window else f"following path to goal {self._q.index + 1}"
+        )
+        return self._tick(cmd)
+
+    # -- planning ---------------------------------------------------------------------------------
+    def _maybe_plan(self, local: Costmap) -> None:
+        o = self.options
+        now = self._now
+        reason = ""
+        if self._force_plan:
+            reason, self._force_plan = self._force_plan, ""
+        elif self._path is None:
+            reason = "new goal"
+        elif (
+            o.replan_on_blocked
+            and now - self._last_attempt_time >= o.blocked_replan_period
+            and self._blocked(local)
+        ):
+            reason = "blocked"
+        elif o.replan_period > 0 and now - self._last_attempt_time >= o.replan_period:
+            reason = "periodic"
+        if not reason or (self._pending is not None and reason == "periodic"):
+            return
+        if self._path is None and self._pending is not None and reason == "new goal":
+            return  # the first plan is on its way
+        self._last_attempt_time = now
+        goal = self._q.goals[self._q.index]
+        if self._request_plan is not None:
+            self._next_id += 1
+            self._pending = self._next_id
+            self._request_plan(
+                PlanRequest(self._next_id, self._global, self._pose, goal, self._q.index, reason)
+            )
+            return
+        assert self._plan_fn is not None
+        try:
+            path = self._plan_fn(self._global, self._pose, goal)
+        except PlannerError as exc:
+            self._plan_failed(exc)
+            return
+        self._accept_plan(path)
+
+    def _accept_plan(self, path: Path) -> None:
+        if len(path) == 0:
+            self._plan_failed(NoValidPathFound("planner returned an empty path"))
+            return
+        goal = self._q.goals[self._q.index]
+        poses = np.array(path.poses, dtype=float, copy=True)
+        poses[-1, 2] = goal.theta  # the controller turns to the goal's heading, not the path's
+        self._path = Path(poses)
+        seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
+        self._path_s = np.concatenate(([0.0], np.cumsum(seg)))
+        self._last_plan_time = self._now
+        self._last_plan_error = None
+        self.controller.set_path(self._path)
+        if (
+            self.state == NavState.STUCK
+            and self._stuck_error is not None
+            and isinstance(self._stuck_error, PlannerError)
+        ):
+            self._clear_stuck()
+
+    def _plan_failed(self, exc: PlannerError) -> None:
+        self._last_plan_error = exc
+        if self._path is None:
+            self._fail(type(exc).__name__, str(exc), exc)
+        elif self._blocked(None) and self.state != NavState.STUCK:
+            self._stuck(type(exc).__name__, f"path blocked and no new path: {exc}", exc)
+        # otherwise keep following the current path; the next periodic replan tries again
+
+    def _blocked(self, local: Costmap | None) -> bool:
+        """Whether a lethal cell lies on the next ``blocked_check_distance`` m of the path."""
+        if self._path is None:
+            return False
+        p, s = self._path.poses, self._path_s
+        i = self._nearest_index()
+        j = int(np.searchsorted(s, s[i] + self.options.blocked_check_distance, side="right"))
+        ahead = p[i : max(j, i + 1), :2]
+        maps = [self._global] if local is None else [self._global, local]
+        for cm in maps:
+            rows, cols = cm.geometry.world_to_cell(ahead)
+            inside = cm.geometry.in_bounds(rows, cols)
+            if np.any(cm.costs[rows[inside], cols[inside]] == LETHAL_OBSTACLE):
+                return True
+        return False
+
+    def _nearest_index(self) -> int:
+        assert self._path is not None
+        p = self._path.poses
+        return int(np.argmin(np.hypot(p[:, 0] - self._pose.x, p[:, 1] - self._pose.y)))
+
+    # -- state helpers ----------------------------------------------------------------------------
+    def _start_goal(self) -> None:
+        self._path = None
+        self._pending = None
+        self._last_attempt_time = -math.inf
+        self._clear_stuck()
+        self.goal_checker.reset()
+        self.progress_checker.reset()
+        self.controller.reset()
+        self.state = NavState.PLANNING
+        self._activity = "planning"
+
+    def _clear_stuck(self) -> None:
+        self._stuck_reason, self._stuck_error = "", None
+        if self.state == NavState.STUCK:
+            self.state = NavState.FOLLOWING
+
+    def _stuck(self, reason: str, message: str, error: BaseException | None) -> NavTick:
+        if self.state != NavState.STUCK:
+            self._stuck_since = self._now
+        self.state = NavState.STUCK
+        self._stuck_reason, self._stuck_error = reason, error
+        self._activity = f"stuck: {message}"
+        return self._tick(ZERO_TWIST)
+
+    def _fail(self, reason: str, message: str, error: BaseException | None) -> NavTick:
+        self._activity = f"failed: {message}"
+        return self._finish(
+            NavOutcome("failed", reason, message, goals_reached=self._q.index, error=error), NavState.FAILED
+        )
+
+    def _finish(self, outcome: NavOutcome, state: NavState) -> NavTick:
+        self.outcome = outcome
+        self.state = state
+        if state != NavState.FAILED:
+            self._activity = state.value
+        self.controller.reset()
+        return self._tick(ZERO_TWIST, outcome)
+
+    def _update_speed(self, now: float, velocity: Twist2D) -> None:
+        if self._last_now is not None and now > self._last_now:
+            a = min(1.0, (now - self._last_now) / self.options.speed_time_constant)
+            self._speed += a * (math.hypot(velocity.vx, velocity.vy) - self._speed)
+        self._last_now = now
+
+    def _remaining(self) -> float:
+        q = self._q
+        if not q.goals or self.state in TERMINAL:
+            return 0.0
+        if self._path is not None:
+            i = self._nearest_index()
+            d = float(self._path_s[-1] - self._path_s[i]) + self._pose.distance_to(
+                Pose2D.from_array(self._path.poses[i])
+            )
+        else:
+            d = self._pose.distance_to(q.goals[q.index])
+        for a, b in zip(q.goals[q.index : -1], q.goals[q.index + 1 :], strict=True):
+            d += a.distance_to(b)
+        return d
+
+    def _tick(self, cmd: Twist2D, outcome: NavOutcome | None = None) -> NavTick:
+        remaining = self._remaining()
+        speed = self._speed if self._speed > 1e-3 else self.options.nominal_speed
+        q = self._q
+        goal = q.goals[q.index] if q.goals and q.index < len(q.goals) else None
+        dbg = self._debug
+        fb = NavFeedback(
+            activity=self._activity,
+            goal_index=q.index,
+            goal_count=len(q.goals),
+            goal=goal,
+            distance_remaining=remaining,
+            eta=remaining / max(speed, 0.05 * self.options.nominal_speed),
+            path=self._path,
+            trajectories=getattr(dbg, "trajectories", None),
+            chosen=int(getattr(dbg, "chosen", -1)),
+            stuck_reason=self._stuck_reason,
+            time_without_progress=self.progress_checker.time_without_progress(self._now),
+        )
+        return NavTick(cmd, self.state, fb, outcome)
+
+
+__all__ = [
+    "GlobalPlanner",
+    "NavFeedback",
+    "NavOutcome",
+    "NavState",
+    "NavTick",
+    "Navigator",
+    "NavigatorOptions",
+    "PlanFn",
+    "PlanRequest",
+]

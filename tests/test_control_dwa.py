@@ -1,0 +1,341 @@
+"""DWA/DWB controller: sampling, arcs, footprint checks, critics and closed-loop driving."""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import numpy as np
+import pytest
+from test_control_world import (
+    RES,
+    SKID_FOOTPRINT,
+    box,
+    footprint_hits_lethal,
+    inflate,
+    integrate,
+    room,
+)
+
+from nav.control import (
+    FOX_CRITICS,
+    DwaController,
+    DwaOptions,
+    GoalChecker,
+    InvalidPath,
+    NoValidControl,
+    PatienceExceeded,
+)
+from nav.control.critics import Oscillation
+from nav.control.footprint import CostWindow, FootprintModel
+from nav.control.trajectory import sample_twists, simulate_arcs, window_1d
+from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
+
+SKID = DwaOptions(footprint=SKID_FOOTPRINT, min_vel_x=-0.15)
+OMNI = DwaOptions(
+    holonomic=True,
+    robot_radius=0.25,
+    max_vel_x=1.5,
+    min_vel_x=-1.5,
+    max_vel_y=1.5,
+    min_vel_y=-1.5,
+    max_speed_xy=1.5,
+    max_vel_theta=0.5,
+    acc_lim_x=1.0,
+    acc_lim_y=1.0,
+    acc_lim_theta=1.0,
+    decel_lim_x=-1.0,
+    decel_lim_y=-1.0,
+    decel_lim_theta=-1.0,
+)
+
+
+def straight(x0: float, y0: float, x1: float, y1: float, theta: float | None = None, n: int = 80) -> Path:
+    xs, ys = np.linspace(x0, x1, n), np.linspace(y0, y1, n)
+    th = math.atan2(y1 - y0, x1 - x0)
+    poses = np.column_stack((xs, ys, np.full(n, th)))
+    if theta is not None:
+        poses[-1, 2] = theta
+    return Path(poses)
+
+
+def drive(ctl: DwaController, pose: Pose2D, costmap, goal: Pose2D, seconds: float, dt: float = 0.05):
+    """Closed loop with ideal velocity tracking; stops when a Nav2 goal checker is satisfied."""
+    checker = GoalChecker()
+    vel = Twist2D()
+    poses, cmds, t = [pose], [], 0.0
+    while t < seconds:
+        if checker.is_goal_reached(pose, goal, vel):
+            return poses, cmds, True
+        cmd, _ = ctl.compute(pose, vel, costmap)
+        pose = integrate(pose, cmd, dt)
+        vel = cmd
+        poses.append(pose)
+        cmds.append(cmd)
+        t += dt
+    return poses, cmds, False
+
+
+# --- sampling and simulation --------------------------------------------------------------------
+
+
+def test_dynamic_window_respects_acceleration_limits_and_contains_zero() -> None:
+    v = window_1d(0.1, -0.15, 0.26, 2.5, -2.5, 0.05, 20)
+    assert v.min() == pytest.approx(0.1 - 0.125) and v.max() == pytest.approx(0.225)
+    assert 0.0 in v and len(v) == 21
+    v = window_1d(0.25, 0.0, 0.26, 2.5, -2.5, 0.05, 20)
+    assert v.max() == pytest.approx(0.26) and v.min() == pytest.approx(0.125) and 0.0 not in v
+
+
+def test_samples_diff_drive_have_no_lateral_velocity_and_omni_do() -> None:
+    skid = sample_twists(SKID, Twist2D(0.1, 0.0, 0.2))
+    assert np.all(skid[:, 1] == 0.0) and len(skid) >= 400
+    assert np.all(np.abs(skid[:, 0] - 0.1) <= 0.125 + 1e-9)
+    assert np.all(np.abs(skid[:, 2] - 0.2) <= 3.2 * 0.05 + 1e-9)
+    omni = sample_twists(OMNI, Twist2D(0.5, 0.2, 0.0))
+    assert len(np.unique(omni[:, 1])) >= 5
+    assert np.all(np.hypot(omni[:, 0], omni[:, 1]) <= 1.5 + 1e-9)
+    assert not np.any(np.all(omni == 0.0, axis=1))  # DWB never samples the all-zero twist
+
+
+def test_closed_form_arcs_match_numerical_integration() -> None:
+    rng = np.random.default_rng(3)
+    twists = np.column_stack((rng.uniform(-1, 1, 40), rng.uniform(-1, 1, 40), rng.uniform(-2, 2, 40)))
+    twists[:5, 2] = 0.0
+    twists[5:8, 2] = 1e-8
+    start = Pose2D(1.0, -2.0, 0.7)
+    times = np.linspace(0.0, 1.7, 18)
+    poses = simulate_arcs(start, twists, times)
+    for k in range(0, 40, 7):
+        p = start
+        for j in range(1, len(times)):
+            p = integrate(p, Twist2D(*twists[k]), times[j] - times[j - 1], substeps=400)
+            assert poses[k, j, 0] == pytest.approx(p.x, abs=1e-4)
+            assert poses[k, j, 1] == pytest.approx(p.y, abs=1e-4)
+            assert float(wrap_angle(poses[k, j, 2] - p.theta)) == pytest.approx(0.0, abs=1e-9)
+
+
+# --- footprint ------------------------------------------------------------------------------------
+
+
+def test_footprint_check_agrees_with_brute_force() -> None:
+    occ = box(room(3.0, 3.0), 1.2, 1.2, 1.5, 1.35)
+    cm = inflate(occ, inscribed=0.1)
+    poly = np.asarray(SKID_FOOTPRINT)
+    model = FootprintModel.build(poly, RES, 16, round_robot=False)
+    rng = np.random.default_rng(7)
+    poses = np.column_stack((rng.uniform(0.6, 2.2, 600), rng.uniform(0.6, 2.0, 600), rng.uniform(-4, 4, 600)))
+    window = CostWindow.around(cm, poses[:, :2], 0.2, unknown_is_lethal=False)
+    flagged = window.footprint_lethal(poses, model)
+    grown = poly * (1 + 2.5 * RES / 0.12)  # a safely larger polygon
+    shrunk = poly * (1 - 2.5 * RES / 0.10)  # a safely smaller one
+    for p, f in zip(poses, flagged, strict=True):
+        pose = Pose2D(*p)
+        if footprint_hits_lethal(cm, pose, shrunk):
+            assert f, f"missed collision at {pose}"
+        if not footprint_hits_lethal(cm, pose, grown):
+            assert not f, f"false collision at {pose}"
+    assert 50 < flagged.sum() < 550
+
+
+def test_rotated_footprint_swaps_its_extent() -> None:
+    poly = np.array([[0.3, 0.05], [-0.3, 0.05], [-0.3, -0.05], [0.3, -0.05]])
+    model = FootprintModel.build(poly, RES, 16, round_robot=False)
+    along_x = model.offsets[0]
+    along_y = model.offsets[4]  # bin 4 of 16 = 90 degrees
+    assert np.ptp(along_x[:, 1]) >= 12 and np.ptp(along_x[:, 0]) <= 6
+    assert np.ptp(along_y[:, 0]) >= 12 and np.ptp(along_y[:, 1]) <= 6
+
+
+# --- one cycle ------------------------------------------------------------------------------------
+
+
+def test_compute_needs_a_valid_path() -> None:
+    ctl = DwaController(SKID)
+    with pytest.raises(InvalidPath):
+        ctl.set_path(Path(np.zeros((0, 3))))
+    with pytest.raises(InvalidPath):
+        ctl.set_path(Path(np.array([[0.0, np.nan, 0.0]])))
+
+
+def test_heads_along_the_path_and_reports_debug() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
+    cmd, dbg = ctl.compute(Pose2D(1.0, 3.0, 0.0), Twist2D(0.2, 0.0, 0.0), cm)
+    assert cmd.vx > 0.2 and abs(cmd.wz) < 0.2
+    k = len(dbg.twists)
+    assert k >= 400 and dbg.trajectories.shape[0] == k and dbg.trajectories.shape[2] == 2
+    assert dbg.chosen == int(np.argmin(dbg.costs))
+    # facing away from the path, it turns towards it (path is to the left: turn left)
+    forward_only = DwaController(DwaOptions(footprint=SKID_FOOTPRINT))
+    forward_only.set_path(straight(1.0, 3.0, 5.0, 3.0))
+    cmd, _ = forward_only.compute(Pose2D(1.0, 2.6, -0.8), Twist2D(), cm)
+    assert cmd.wz > 0
+
+
+def test_never_picks_a_colliding_trajectory() -> None:
+    occ = box(room(), 1.45, 2.0, 1.6, 4.0)  # wall 0.3 m ahead of the robot's nose
+    cm = inflate(occ, inscribed=0.1)
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
+    cmd, dbg = ctl.compute(Pose2D(1.0, 3.0, 0.0), Twist2D(0.26, 0.0, 0.0), cm)
+    assert dbg.rejections.get("ObstacleFootprint", 0) > 0
+    traj = dbg.chosen_trajectory
+    poly = np.asarray(SKID_FOOTPRINT)
+    t = np.linspace(0, SKID.sim_time, traj.shape[0])
+    for (x, y), ti in zip(traj, t, strict=True):
+        assert not footprint_hits_lethal(cm, Pose2D(x, y, ti * cmd.wz), poly)
+
+
+def test_enclosed_robot_raises_no_valid_control_then_patience_exceeded() -> None:
+    occ = room()
+    occ[55:66, 15:26] = True
+    occ[58:63, 18:23] = False  # a 0.25 m pocket: no room to move
+    cm = inflate(occ, inscribed=0.1)
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
+    pose = Pose2D(1.025, 3.025, 0.0)
+    with pytest.raises(NoValidControl) as first:
+        ctl.compute(pose, Twist2D(), cm)
+    assert not isinstance(first.value, PatienceExceeded)
+    assert first.value.rejections
+    with pytest.raises(PatienceExceeded):
+        for _ in range(10):
+            try:
+                ctl.compute(pose, Twist2D(), cm)
+            except PatienceExceeded:
+                raise
+            except NoValidControl:
+                pass
+
+
+def test_off_costmap_is_rejected_and_unknown_follows_the_option() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    cm.costs[:, 70:] = 255  # unknown east of x = 3.5
+    lethal_unknown = DwaController(DwaOptions(footprint=SKID_FOOTPRINT, unknown_is_lethal=True))
+    free_unknown = DwaController(DwaOptions(footprint=SKID_FOOTPRINT))
+    for ctl in (lethal_unknown, free_unknown):
+        ctl.set_path(straight(3.0, 3.0, 5.0, 3.0))
+    pose, vel = Pose2D(3.2, 3.0, 0.0), Twist2D()
+    _, dbg_l = lethal_unknown.compute(pose, vel, cm)
+    _, dbg_f = free_unknown.compute(pose, vel, cm)
+    assert 0 < dbg_l.legal.sum() < dbg_f.legal.sum()
+    # a costmap that simply ends at x = 3.5: off the grid is lethal whatever the unknown option
+    cropped = Costmap(GridGeometry(RES, 70, cm.geometry.height, Pose2D()), cm.costs[:, :70].copy())
+    _, dbg_c = free_unknown.compute(pose, vel, cropped)
+    assert dbg_c.legal.sum() == dbg_l.legal.sum()
+
+
+def test_rotates_in_place_inside_the_goal_window() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(1.0, 3.0, 3.0, 3.0, theta=math.pi / 2))
+    cmd, dbg = ctl.compute(Pose2D(2.9, 3.0, 0.0), Twist2D(0.1, 0.0, 0.0), cm)
+    assert dbg.in_goal_window
+    assert cmd.vx == 0.0 and cmd.vy == 0.0 and cmd.wz > 0
+
+
+def test_oscillation_critic_forbids_flipping_back_until_moved() -> None:
+    crit = Oscillation(SKID)
+    p = Pose2D()
+    crit.debrief(Twist2D(0.0, 0.0, 0.5), p)
+    crit.debrief(Twist2D(0.0, 0.0, -0.5), p)  # flipped: positive rotation now oscillating
+    assert crit.theta.oscillating(np.array([0.3, -0.3])).tolist() == [True, False]
+    crit.debrief(Twist2D(0.0, 0.0, -0.5), Pose2D(0.0, 0.0, -0.1))
+    assert crit.theta.flipped
+    crit.debrief(Twist2D(0.0, 0.0, -0.5), Pose2D(0.0, 0.0, -0.25))  # turned > 0.2 rad: reset
+    assert not crit.theta.flipped
+
+
+# --- closed loop ------------------------------------------------------------------------------------
+
+
+def bent_path() -> Path:
+    """A path from (1, 3) to (5, 3) bending north around a block at x 2.8..3.2, y 2.85..3.15,
+    as the global planner would make it."""
+    pts = np.array([[1.0, 3.0], [2.3, 3.0], [3.0, 3.75], [3.7, 3.0], [5.0, 3.0]])
+    segs = [np.linspace(a, b, 30, endpoint=False) for a, b in itertools.pairwise(pts)]
+    dense = np.vstack((*segs, pts[-1]))
+    th = np.append(np.arctan2(*np.diff(dense, axis=0)[:, ::-1].T), 0.0)
+    return Path(np.column_stack((dense, th)))
+
+
+def polygon_of(opts: DwaOptions) -> np.ndarray:
+    if opts.footprint:
+        return np.asarray(opts.footprint)
+    a = np.linspace(0, 2 * np.pi, 24, endpoint=False)
+    return opts.robot_radius * np.column_stack((np.cos(a), np.sin(a)))
+
+
+@pytest.mark.parametrize(
+    "opts",
+    [SKID, OMNI, DwaOptions(footprint=SKID_FOOTPRINT, critics=(*FOX_CRITICS, "RotateToGoal"))],
+    ids=["skid", "omni", "fox"],
+)
+def test_drives_around_an_obstacle_to_the_goal_without_touching_it(opts: DwaOptions) -> None:
+    occ = box(room(), 2.8, 2.85, 3.2, 3.15)  # a 0.4 x 0.3 m block sitting on the straight line
+    cm = inflate(occ, inscribed=opts.inscribed_radius)
+    ctl = DwaController(opts)
+    ctl.set_path(bent_path())
+    goal = Pose2D(5.0, 3.0, 0.0)
+    poses, _, reached = drive(ctl, Pose2D(1.0, 3.0, 0.0), cm, goal, 60.0)
+    assert reached
+    assert not any(footprint_hits_lethal(cm, p, polygon_of(opts)) for p in poses[::2])
+    assert max(p.y for p in poses) > 3.15 + opts.inscribed_radius  # it went round, north
+
+
+def test_goal_approach_does_not_oscillate() -> None:
+    """The angular command changes sign at most twice in the last 2 s before the goal is reached,
+    even when the goal heading is 90 degrees off the approach direction."""
+    cm = inflate(room(), inscribed=0.1)
+    for goal_yaw in (math.pi / 2, -math.pi * 0.9):
+        ctl = DwaController(SKID)
+        goal = Pose2D(3.0, 3.0, goal_yaw)
+        ctl.set_path(straight(1.0, 3.0, 3.0, 3.0, theta=goal_yaw))
+        _, cmds, reached = drive(ctl, Pose2D(1.0, 3.0, 0.0), cm, goal, 40.0)
+        assert reached
+        wz = np.array([c.wz for c in cmds[-40:]])
+        signs = np.sign(wz[np.abs(wz) > 1e-9])
+        assert np.count_nonzero(np.diff(signs)) <= 2, wz
+
+
+def test_fox_admissible_velocities_brake_before_an_obstacle() -> None:
+    """With Fox's objective alone the robot heads straight for a goal behind a block: its
+    admissible-velocity test must make it stop short of the block, never touch it."""
+    occ = box(room(), 2.8, 3.05, 3.1, 3.35)
+    cm = inflate(occ, inscribed=0.1)
+    ctl = DwaController(DwaOptions(footprint=SKID_FOOTPRINT, critics=FOX_CRITICS))
+    ctl.set_path(straight(1.0, 3.2, 5.0, 3.2))
+    poses, cmds, reached = drive(ctl, Pose2D(1.0, 3.2, 0.0), cm, Pose2D(5.0, 3.2, 0.0), 12.0)
+    assert not reached  # Fox's local minimum: the goal is straight through the block
+    assert not any(footprint_hits_lethal(cm, p, np.asarray(SKID_FOOTPRINT)) for p in poses)
+    assert 2.5 < poses[-1].x < 2.8 - 0.12 and cmds[-1].vx == 0.0
+
+
+def test_fast_arrival_in_the_goal_window_brakes_then_turns() -> None:
+    """Entering the goal window at 0.2 m/s (below trans_stopped_velocity, so RotateToGoal is in its
+    rotating phase) while zero speed is not reachable in one period: brake, do not give up."""
+    cm = inflate(room(), inscribed=0.1)
+    ctl = DwaController(DwaOptions(footprint=SKID_FOOTPRINT, acc_lim_x=1.0, decel_lim_x=-1.0))
+    ctl.set_path(straight(1.0, 3.0, 3.0, 3.0, theta=math.pi / 2))
+    cmd, _ = ctl.compute(Pose2D(2.8, 3.0, 0.0), Twist2D(0.2, 0.0, 0.0), cm)
+    assert cmd.vx == pytest.approx(0.15)
+    cmd, _ = ctl.compute(Pose2D(2.81, 3.0, 0.0), cmd, cm)
+    assert cmd.vx == pytest.approx(0.10)
+
+
+def test_path_and_goal_critics_measure_cells_to_the_path_and_local_goal() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0, n=9))  # vertices 0.5 m apart: tests the resampling
+    _, dbg = ctl.compute(Pose2D(1.5, 2.8, 0.3), Twist2D(0.1, 0.0, 0.0), cm)
+    end = dbg.trajectories[:, -1, :].astype(float)
+    expected_path = np.abs(end[:, 1] - 3.0) / RES * SKID.path_dist_scale
+    assert np.allclose(dbg.critic_costs["PathDist"], expected_path, atol=0.26 * SKID.path_dist_scale)
+    local_goal = dbg.local_path[-1]
+    assert local_goal[0] == pytest.approx(3.5)  # forward_prune_distance = 2 m past the nearest vertex
+    expected_goal = (
+        np.hypot(end[:, 0] - local_goal[0], end[:, 1] - local_goal[1]) / RES * SKID.goal_dist_scale
+    )
+    assert np.allclose(dbg.critic_costs["GoalDist"], expected_goal, rtol=1e-4)

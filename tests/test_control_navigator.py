@@ -1,0 +1,323 @@
+"""Navigator end to end: a grid planner, the DWA controller and an exact kinematic integrator
+(no simulator), in hand-made costmaps."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_control_world import SKID_FOOTPRINT, GridPlanner, box, inflate, integrate, l_corridor, room
+
+from nav.control import DwaController, DwaOptions, GoalChecker, ProgressChecker
+from nav.navigator import Navigator, NavigatorOptions, NavState, NavTick, PlanRequest
+from nav.planning.errors import GoalOccupied
+from nav.types import Costmap, Path, Pose2D, Twist2D
+
+DT = 0.05
+
+
+def make_nav(planner=None, options: NavigatorOptions | None = None, **kw) -> Navigator:
+    # fewer samples than DWB's 20 x 20: the navigator's logic is under test here, not the sampling
+    ctl = DwaController(DwaOptions(footprint=SKID_FOOTPRINT, vx_samples=8, vtheta_samples=11))
+    return Navigator(planner or GridPlanner(), ctl, GoalChecker(), ProgressChecker(), options, **kw)
+
+
+def run(
+    nav: Navigator,
+    pose: Pose2D,
+    costmap: Costmap,
+    seconds: float,
+    moves: bool = True,
+    on_tick=None,
+    start: float = 0.0,
+) -> tuple[list[NavTick], list[Pose2D]]:
+    """Tick the navigator at 20 Hz from time ``start``, integrating its command (ideal velocity
+    tracking), until an outcome is reported or ``seconds`` have passed."""
+    ticks, poses, vel, now = [], [pose], Twist2D(), start
+    while now < start + seconds:
+        tick = nav.tick(now, pose, vel, costmap, costmap)
+        ticks.append(tick)
+        if on_tick is not None:
+            on_tick(now, tick)
+        if tick.outcome is not None:
+            break
+        if moves:
+            pose = integrate(pose, tick.cmd, DT)
+            vel = tick.cmd
+        poses.append(pose)
+        now += DT
+    return ticks, poses
+
+
+def test_reaches_the_end_of_an_l_shaped_corridor() -> None:
+    cm = inflate(l_corridor(), inscribed=0.1)
+    nav = make_nav()
+    goal = Pose2D(4.0, 4.0, math.pi / 2)
+    nav.set_goals([goal])
+    ticks, poses = run(nav, Pose2D(0.5, 1.0, 0.0), cm, 90.0)
+    out = ticks[-1].outcome
+    assert out is not None and out.kind == "reached", ticks[-1].feedback.activity
+    assert poses[-1].distance_to(goal) <= 0.25
+    assert all(cm.cost_at(np.array([[p.x, p.y]]))[0] < 254 for p in poses)
+    remaining = [t.feedback.distance_remaining for t in ticks if t.state == NavState.FOLLOWING]
+    assert remaining[0] > 6.0 and remaining[-1] < 0.5
+    assert ticks[10].feedback.eta > 0 and ticks[10].cmd.vx > 0
+    assert ticks[10].feedback.trajectories is not None and ticks[10].feedback.chosen >= 0
+
+
+def test_waypoints_are_visited_in_order() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav()
+    goals = [Pose2D(4.5, 1.5, 0.0), Pose2D(4.5, 4.5, math.pi / 2), Pose2D(1.5, 4.5, math.pi)]
+    nav.set_goals(goals)
+    index_changes: list[tuple[int, Pose2D]] = []
+    state = {"last": 0}
+
+    def watch(now: float, tick: NavTick) -> None:
+        if tick.feedback.goal_index != state["last"]:
+            state["last"] = tick.feedback.goal_index
+            index_changes.append((tick.feedback.goal_index, tick.feedback.goal))
+
+    ticks, poses = run(nav, Pose2D(1.5, 1.5, 0.0), cm, 120.0, on_tick=watch)
+    assert ticks[-1].outcome is not None and ticks[-1].outcome.kind == "reached"
+    assert ticks[-1].outcome.goals_reached == 3
+    assert [i for i, _ in index_changes] == [1, 2, 3]
+    # the robot passed within tolerance of each waypoint, in order
+    first_near = [next(k for k, p in enumerate(poses) if p.distance_to(g) <= 0.25) for g in goals]
+    assert first_near == sorted(first_near)
+
+
+def test_cancel_stops_and_reports_cancelled() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav()
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+
+    def cancel_after_two_seconds(now: float, tick: NavTick) -> None:
+        if now >= 2.0 and tick.outcome is None:
+            nav.cancel()
+
+    ticks, poses = run(nav, Pose2D(1.0, 3.0, 0.0), cm, 20.0, on_tick=cancel_after_two_seconds)
+    last = ticks[-1]
+    assert last.outcome is not None and last.outcome.kind == "cancelled"
+    assert last.state == NavState.CANCELLED and last.cmd.is_zero()
+    assert 1.0 < poses[-1].x < 2.0
+    after = nav.tick(3.0, poses[-1], Twist2D(), cm)
+    assert after.cmd.is_zero() and after.outcome is None and after.state == NavState.CANCELLED
+
+
+def test_typed_planner_failure_is_the_outcome() -> None:
+    cm = inflate(box(room(), 4.0, 2.5, 5.0, 3.5), inscribed=0.1)
+    nav = make_nav()
+    nav.set_goals([Pose2D(4.5, 3.0, 0.0)])  # inside the block
+    tick = nav.tick(0.0, Pose2D(1.0, 3.0, 0.0), Twist2D(), cm)
+    assert tick.state == NavState.FAILED and tick.cmd.is_zero()
+    assert tick.outcome is not None and tick.outcome.kind == "failed"
+    assert tick.outcome.reason == "GoalOccupied" and isinstance(tick.outcome.error, GoalOccupied)
+
+
+def test_asynchronous_planning_through_request_and_deliver() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    requests: list[PlanRequest] = []
+    nav = make_nav(request_plan=requests.append)
+    nav.set_goals([Pose2D(4.0, 3.0, 0.0)])
+    pose = Pose2D(1.0, 3.0, 0.0)
+    t0 = nav.tick(0.0, pose, Twist2D(), cm)
+    assert t0.state == NavState.PLANNING and t0.cmd.is_zero() and len(requests) == 1
+    t1 = nav.tick(0.05, pose, Twist2D(), cm)  # no duplicate request while one is pending
+    assert len(requests) == 1 and t1.state == NavState.PLANNING
+    req = requests[0]
+    assert req.reason == "new goal" and req.goal == Pose2D(4.0, 3.0, 0.0)
+    nav.deliver_plan(req.id + 99, GoalOccupied("stale"))  # unknown id: ignored
+    nav.deliver_plan(req.id, GridPlanner().plan(req.costmap, req.start, req.goal))
+    t2 = nav.tick(0.1, pose, Twist2D(), cm)
+    assert t2.state == NavState.FOLLOWING and t2.cmd.vx > 0
+    # periodic replans go out as requests too, while the robot keeps following the old path
+    for k in range(25):
+        nav.tick(0.15 + k * DT, pose, t2.cmd, cm)
+    assert [r.reason for r in requests] == ["new goal", "periodic"]
+
+
+def test_blocked_path_triggers_a_replan_around_the_new_obstacle() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    planner = GridPlanner()
+    reasons: list[str] = []
+    nav: Navigator
+
+    def request(req: PlanRequest) -> None:  # a worker that answers at once
+        reasons.append(req.reason)
+        try:
+            nav.deliver_plan(req.id, planner.plan(req.costmap, req.start, req.goal))
+        except Exception as exc:  # the planner's typed error goes back the same way
+            nav.deliver_plan(req.id, exc)
+
+    nav = make_nav(request_plan=request, options=NavigatorOptions(replan_period=0.0))
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    blocked = inflate(box(room(), 3.0, 2.6, 3.3, 3.4), inscribed=0.1)
+    world = {"cm": cm}
+
+    def drop_obstacle(now: float, tick: NavTick) -> None:
+        if now >= 2.0:
+            world["cm"] = blocked  # a person steps onto the path
+
+    ticks, poses, vel, now, pose = [], [], Twist2D(), 0.0, Pose2D(1.0, 3.0, 0.0)
+    while now < 60.0:
+        tick = nav.tick(now, pose, vel, world["cm"], world["cm"])
+        drop_obstacle(now, tick)
+        ticks.append(tick)
+        if tick.outcome is not None:
+            break
+        pose, vel = integrate(pose, tick.cmd, DT), tick.cmd
+        poses.append(pose)
+        now += DT
+    assert "blocked" in reasons
+    assert ticks[-1].outcome is not None and ticks[-1].outcome.kind == "reached"
+    assert all(blocked.cost_at(np.array([[p.x, p.y]]))[0] < 254 for p in poses if p.x > 2.5)
+
+
+def test_no_progress_reports_stuck_then_fails_after_the_timeout() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav(options=NavigatorOptions(stuck_timeout=3.0))
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    # wheels spinning in place: the robot never moves whatever it is told
+    ticks, _ = run(nav, Pose2D(1.0, 3.0, 0.0), cm, 20.0, moves=False)
+    stuck = [t for t in ticks if t.state == NavState.STUCK]
+    assert stuck and stuck[0].feedback.stuck_reason == "NoProgress" and stuck[0].cmd.is_zero()
+    first_stuck = ticks.index(stuck[0]) * DT
+    assert 10.0 <= first_stuck <= 10.2  # movement_time_allowance
+    out = ticks[-1].outcome
+    assert out is not None and out.kind == "failed" and out.reason == "NoProgress"
+    assert 13.0 <= (len(ticks) - 1) * DT <= 13.3
+
+
+def test_resume_leaves_stuck_and_replans() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav()
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    ticks, poses = run(nav, Pose2D(1.0, 3.0, 0.0), cm, 10.5, moves=False)
+    assert ticks[-1].state == NavState.STUCK
+    nav.resume()
+    ticks2, _ = run(nav, poses[-1], cm, 40.0, start=len(ticks) * DT)
+    assert ticks2[0].state == NavState.FOLLOWING
+    assert ticks2[-1].outcome is not None and ticks2[-1].outcome.kind == "reached"
+
+
+def test_controller_patience_exceeded_is_stuck_with_its_name() -> None:
+    occ = room()
+    occ[55:66, 15:26] = True
+    occ[58:63, 18:23] = False  # a pocket the robot cannot move in
+    cm = inflate(occ, inscribed=0.1)
+    nav = make_nav(
+        planner=None,
+        plan_fn=lambda costmap, start, goal: Path(np.array([[start.x, start.y, 0.0], [goal.x, goal.y, 0.0]])),
+    )
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    ticks, _ = run(nav, Pose2D(1.025, 3.025, 0.0), cm, 2.0)
+    states = [t.state for t in ticks]
+    assert NavState.STUCK in states
+    first = states.index(NavState.STUCK)
+    assert ticks[first].feedback.stuck_reason == "PatienceExceeded"
+    assert all(t.cmd.is_zero() for t in ticks)
+    assert ticks[first - 1].feedback.activity.startswith("no safe trajectory")
+
+
+def test_set_goals_validates() -> None:
+    nav = make_nav()
+    with pytest.raises(ValueError):
+        nav.set_goals([])
+    with pytest.raises(ValueError):
+        nav.set_goals([Pose2D(math.nan, 0.0, 0.0)])
+
+
+def test_no_oscillation_before_reaching_a_goal_facing_sideways() -> None:
+    """The most reported DWB complaint: wobbling at the goal. The angular command may change sign
+    at most twice in the last 2 s before the goal is reached."""
+    cm = inflate(room(), inscribed=0.1)
+    for yaw in (math.pi / 2, -2.5):
+        nav = make_nav()
+        nav.set_goals([Pose2D(3.0, 3.2, yaw)])
+        ticks, _ = run(nav, Pose2D(1.0, 3.0, 0.0), cm, 40.0)
+        assert ticks[-1].outcome is not None and ticks[-1].outcome.kind == "reached"
+        wz = np.array([t.cmd.wz for t in ticks[-41:-1]])
+        signs = np.sign(wz[np.abs(wz) > 1e-9])
+        assert np.count_nonzero(np.diff(signs)) <= 2, wz
+
+
+def test_with_the_project_astar_planner() -> None:
+    """The same corridor run with the planning area's A* (the planner the app uses)."""
+    from nav.planning import AStarPlanner
+
+    cm = inflate(l_corridor(), inscribed=0.1)
+    nav = make_nav(planner=AStarPlanner())
+    goal = Pose2D(4.0, 4.0, math.pi / 2)
+    nav.set_goals([goal])
+    ticks, poses = run(nav, Pose2D(0.5, 1.0, 0.0), cm, 90.0)
+    assert ticks[-1].outcome is not None and ticks[-1].outcome.kind == "reached"
+    assert all(cm.cost_at(np.array([[p.x, p.y]]))[0] < 254 for p in poses)
+
+
+def test_turtlebot3_world_round_trip_on_the_real_map() -> None:
+    """Nav2's TurtleBot3 world map (a real SLAM map, nine pillars in a hexagon): the skid4 robot
+    with its profile's limits visits four waypoints between the pillars and comes back."""
+    from pathlib import Path as FsPath
+
+    from maps.mapio import load_map_yaml
+    from nav.types import NO_INFORMATION
+    from robot.profiles import load_profile
+
+    shared = FsPath(__file__).resolve().parents[2] / "shared"
+    grid = load_map_yaml(shared / "datasets/ros_maps/turtlebot3_navigation2/map.yaml")
+    occ = grid.occupied_mask()
+    cm = inflate(occ, inscribed=0.1)
+    cm.costs[grid.data < 0] = NO_INFORMATION
+    cm = Costmap(grid.geometry, cm.costs)
+    nav = Navigator.for_robot(load_profile("skid4"), GridPlanner())
+    assert nav.controller.options.footprint and nav.controller.options.max_vel_x == 0.26
+    goals = [
+        Pose2D(0.55, -0.55, 0.0),
+        Pose2D(1.6, 0.55, math.pi / 2),
+        Pose2D(-0.55, 0.55, math.pi),
+        Pose2D(-2.0, -0.5, -math.pi / 2),
+    ]
+    nav.set_goals(goals)
+    ticks, poses = run(nav, Pose2D(-2.0, -0.5, 0.0), cm, 120.0)
+    out = ticks[-1].outcome
+    assert out is not None and out.kind == "reached" and out.goals_reached == 4
+    centre_costs = cm.cost_at(np.array([[p.x, p.y] for p in poses]))
+    assert centre_costs.max() < 253  # never even inside the inscribed radius
+
+
+def test_person_stepping_in_30_cm_ahead() -> None:
+    """Source A's hardest scenario: a person steps in about 30 cm ahead of the moving robot, stays
+    3 s, then leaves. The robot must not touch them and must still reach the goal."""
+    from test_control_world import footprint_hits_lethal
+
+    free = inflate(room(), inscribed=0.1)
+    nav = make_nav()
+    goal = Pose2D(5.0, 3.0, 0.0)
+    nav.set_goals([goal])
+    pose, vel, now = Pose2D(1.0, 3.0, 0.0), Twist2D(), 0.0
+    person_cm: Costmap | None = None
+    person_poses: list[Pose2D] = []
+    outcome = None
+    while now < 60.0:
+        if person_cm is None and now >= 3.0:
+            occ = room()
+            cx, cy = pose.x + 0.12 + 0.30 + 0.15, pose.y  # 30 cm ahead of the nose, 0.3 m wide
+            yy, xx = np.mgrid[0 : occ.shape[0], 0 : occ.shape[1]]
+            occ |= np.hypot((xx + 0.5) * 0.05 - cx, (yy + 0.5) * 0.05 - cy) <= 0.15
+            person_cm = inflate(occ, inscribed=0.1)
+        present = person_cm is not None and now < 6.0
+        cm = person_cm if present else free
+        tick = nav.tick(now, pose, vel, free, cm)  # the person shows in the local costmap only
+        if tick.outcome is not None:
+            outcome = tick.outcome
+            break
+        pose, vel = integrate(pose, tick.cmd, DT), tick.cmd
+        if present:
+            person_poses.append(pose)
+        now += DT
+    assert outcome is not None and outcome.kind == "reached"
+    assert person_cm is not None and person_poses
+    poly = np.asarray(SKID_FOOTPRINT)
+    assert not any(footprint_hits_lethal(person_cm, p, poly) for p in person_poses)
