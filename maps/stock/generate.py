@@ -7,6 +7,10 @@ Each YAML carries ``navdeck_start: [x, y, theta]``, a free start pose (map_serve
   4 x 4 cm chair legs (source A's smallest object).
 - ``office`` (30 x 20 m): a central corridor with rooms on both sides behind 0.9 m doors, desks.
 - ``greenhouse`` (20 x 12 m): parallel plant rows with 1.2 m aisles and headlands (source C).
+
+People, soil mounds and puddles are not drawn here: they are absent from the maps on purpose (the
+robot must meet them with its sensors) and live in the hand-written sidecars
+``<name>.scenario.toml`` (``robot.sim.scenario``), loaded with ``World.stock(name, scenario=True)``.
 """
 
 from __future__ import annotations

@@ -5,11 +5,16 @@ the latest lidar scan (scans are taken at the profile's rate, from the pose at t
 cumulative wheel ticks, the gyro averaged over the interval (an integrating IMU, as the base
 firmware reports it), IR readings, battery voltage and whether the body collided. With a
 ``VirtualClock`` and a fixed seed every run is bit-for-bit repeatable.
+
+People walk in the world (``driver.people``, a ``robot.sim.people.Crowd``) and are stepped with the
+physics; fault switches (``driver.faults``, a ``robot.sim.faults.SimFaults``) corrupt what the
+driver reports the way failing hardware would.
 """
 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 
@@ -17,8 +22,10 @@ from nav.types import LaserScan, Pose2D, Twist2D
 from robot.base import ImuReading, IrReading, SensorFrame, WheelTicks
 from robot.clock import Clock
 from robot.profiles import RobotProfile
+from robot.sim.faults import SimFaults
 from robot.sim.ir import SimIr
 from robot.sim.lidar import SimLidar
+from robot.sim.people import Crowd
 from robot.sim.physics import SimBody, SimOptions
 from robot.sim.world import World
 
@@ -50,6 +57,8 @@ class SimDriver:
         self._t = self._t0
         self._next_scan = self._t
         self._next_ir = self._t
+        self._next_people = self._t
+        self._people_t = self._t
         self._cmd = Twist2D()
         self._estop = False
         self._ir_blocked = False
@@ -62,6 +71,12 @@ class SimDriver:
         bias = profile.imu.gyro_bias if self.options.gyro_noise else 0.0
         self._gyro_bias = bias
         self._gyro_std = profile.imu.gyro_noise_std if self.options.gyro_noise else 0.0
+        self.faults = SimFaults()
+        self._tick_offset = np.zeros(profile.wheel_count)  # radians of encoder slip so far, per wheel
+        self._slip_angle = self.body.wheel_angle.copy()  # wheel angles when slip was last accounted
+        self.collision_with: str | None = None  # what the latest collision was with
+        world.people.robot_radius = float(np.max(np.hypot(*self.body.samples.T)))
+        world.people.robot_front = float(np.max(self.body.samples[:, 0]))
 
     # ----------------------------------------------------------------------------- Driver API
 
@@ -99,12 +114,13 @@ class SimDriver:
         imu = None
         if self._gyro_n:
             ax, ay = self.body.last_accel
-            imu = ImuReading(stamp, self._gyro_sum / self._gyro_n, (ax, ay, 9.81))
+            gyro = self._gyro_sum / self._gyro_n + self.faults.gyro_bias_jump
+            imu = ImuReading(stamp, gyro, (ax, ay, 9.81))
             self._gyro_sum, self._gyro_n = 0.0, 0
         frame = SensorFrame(
             stamp=stamp,
             scan=self._scan,
-            ticks=WheelTicks(stamp, self.body.ticks()),
+            ticks=WheelTicks(stamp, self._ticks()),
             imu=imu,
             ir=self._ir_reading,
             battery_v=self.battery_v,
@@ -115,6 +131,21 @@ class SimDriver:
         return frame
 
     # -------------------------------------------------------------------------- simulation API
+
+    @property
+    def people(self) -> Crowd:
+        """The people walking in this world: ``add_loop``, ``add_random``, ``add_step_in``, ``add``,
+        ``remove(id)``, ``list()``, ``poses()`` ((P, 3) x, y, heading for the 3D view)."""
+        return self.world.people
+
+    @property
+    def lidar_enabled(self) -> bool:
+        """Fault switch: False and the lidar stops publishing (see ``faults``)."""
+        return self.faults.lidar_enabled
+
+    @lidar_enabled.setter
+    def lidar_enabled(self, value: bool) -> None:
+        self.faults.lidar_enabled = bool(value)
 
     @property
     def truth_pose(self) -> Pose2D:
@@ -132,7 +163,8 @@ class SimDriver:
     @property
     def battery_v(self) -> float:
         p = self.profile
-        return p.battery_empty_v + (p.battery_full_v - p.battery_empty_v) * self._charge
+        v = p.battery_empty_v + (p.battery_full_v - p.battery_empty_v) * self._charge
+        return max(0.0, v - self.faults.battery_sag)
 
     def teleport(self, pose: Pose2D) -> None:
         """Move the body instantly (kidnapping); velocities are zeroed, encoders do not notice."""
@@ -149,8 +181,23 @@ class SimDriver:
             cmd = Twist2D(0.0, cmd.vy, cmd.wz)
         return cmd
 
+    def _ticks(self) -> np.ndarray:
+        """Encoder counts as the base reports them: the true wheel angles plus any slip the
+        ``faults.slip_*`` switches have caused since they were set (accounted once per read)."""
+        angle = self.body.wheel_angle
+        scale = self.faults.tick_scale(self.profile.wheel_count)
+        self._tick_offset += (angle - self._slip_angle) * (scale - 1.0)
+        self._slip_angle = angle.copy()
+        counted = angle + self._tick_offset
+        return np.floor(counted / (2 * math.pi) * self.profile.ticks_per_rev).astype(np.int64)
+
     def _substep(self) -> None:
         dt = self._dt
+        if self._t + 1e-12 >= self._next_people:
+            self._next_people += 1.0 / self.options.people_rate_hz
+            if len(self.world.people):
+                self.world.people.step(self._t - self._people_t, self.body.pose)
+            self._people_t = self._t
         if self._t + 1e-12 >= self._next_ir:
             self._next_ir += 1.0 / self.options.ir_rate_hz
             reading = self.ir.read(self.world, self.body.pose, self._t)
@@ -163,6 +210,7 @@ class SimDriver:
             self.body.velocity = Twist2D()
         if self.body.step(self.world, self._target(), dt):
             self._collision = True
+            self.collision_with = self.body.last_hit
         self._k += 1
         self._t = self._t0 + self._k * dt
         noise = self._gyro_std * self.body.noise.next() if self._gyro_std > 0 else 0.0
@@ -176,4 +224,9 @@ class SimDriver:
     def _maybe_scan(self) -> None:
         if self._t + 1e-12 >= self._next_scan:
             self._next_scan += self.lidar.period
-            self._scan = self.lidar.scan(self.world, self.body.pose, self._t)
+            if not self.faults.lidar_enabled:
+                return  # a silent lidar: no scan (and no ray cast)
+            scan = self.lidar.scan(self.world, self.body.pose, self._t)
+            if self.faults.lidar_garbage > 0.0:
+                scan = replace(scan, ranges=self.faults.corrupt(scan.ranges, self.rng))
+            self._scan = scan

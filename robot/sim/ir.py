@@ -4,7 +4,8 @@ Each sensor looks along a small fan of rays across its field of view; it reports
 return and triggers when that is within its range, like the digital output that stops the motors
 in the base. The rays are sampled every ``IR_STEP`` metres (finer than any map resolution we use)
 rather than ray cast exactly: an IR sensor is a coarse proximity switch, and one table lookup for
-all samples keeps the 20 Hz check cheap inside the physics loop.
+all samples keeps the 20 Hz check cheap inside the physics loop. People (discs) are tested on the
+same sample points.
 """
 
 from __future__ import annotations
@@ -50,9 +51,14 @@ class SimIr:
 
     def read(self, world: World, base_pose: Pose2D, stamp: float) -> IrReading:
         n = len(self.sensors)
-        if not n or world.clearance_at(base_pose.x, base_pose.y) > self._reach:
+        people = len(world.people) > 0 and world.people.near(base_pose.x, base_pose.y, self._reach)
+        if not n or (not people and world.clearance_at(base_pose.x, base_pose.y) > self._reach):
             return IrReading(stamp, np.zeros(n, dtype=bool), np.full(n, np.inf))
-        hit = world.raycaster.occupied_at(base_pose.transform_points(self._points)).reshape(self._shape)
+        pts = base_pose.transform_points(self._points)
+        hit = world.raycaster.occupied_at(pts)
+        if people:
+            hit |= world.people.contains(pts)
+        hit = hit.reshape(self._shape)
         hit &= self._in_range
         first = np.where(hit.any(axis=2), self._dist[hit.argmax(axis=2)], np.inf)  # (n, rays)
         nearest = first.min(axis=1)

@@ -1,5 +1,5 @@
 """Rigid-body physics of the simulated base: acceleration-limited motors, wheel slip, encoders and a
-footprint that cannot pass through obstacles.
+footprint that cannot pass through obstacles or people.
 
 Each fixed substep (``SimOptions.physics_rate_hz``) the motor twist moves toward the command within
 the profile's ``acc_lim_*`` / ``decel_lim_*``; the wheels turn by the inverse kinematics of that
@@ -40,6 +40,9 @@ class SimOptions:
     """Apply the profile's gyro bias and white noise. Default True."""
     ir_rate_hz: float = 20.0
     """Hz; how often the IR sensors are evaluated. Default 20."""
+    people_rate_hz: float = 25.0
+    """Hz; how often people are moved (at most 5 cm per step at 1.2 m/s, the map's cell size;
+    stepping them every physics substep would cost more than the robot's own physics). Default 25."""
     ir_stop: bool = True
     """The base stops forward motion when an IR sensor triggers (source A's interrupt). Default True."""
     battery_life_s: float = 3 * 3600.0
@@ -55,6 +58,7 @@ class SimOptions:
         positive = (
             "physics_rate_hz",
             "ir_rate_hz",
+            "people_rate_hz",
             "battery_life_s",
             "footprint_spacing",
             "footprint_interior_spacing",
@@ -133,20 +137,54 @@ class SimBody:
             profile.footprint_polygon(32), options.footprint_spacing, options.footprint_interior_spacing
         )
         self._reach = float(np.max(np.hypot(self.samples[:, 0], self.samples[:, 1])))
+        self.last_hit: str | None = None  # what the latest collision was with
+        self._rest: tuple[Pose2D, int] | None = None  # (pose, world version) verified free at rest
         self.last_accel = (0.0, 0.0)
         self.true_yaw_rate = 0.0
 
     def collides(self, world: World, pose: Pose2D) -> bool:
-        """Whether the footprint at ``pose`` overlaps an occupied cell (sampled every
-        ``footprint_spacing`` on the edge and ``footprint_interior_spacing`` inside)."""
+        """Whether the footprint at ``pose`` overlaps an occupied cell or a person (sampled every
+        ``footprint_spacing`` on the edge and ``footprint_interior_spacing`` inside). Sets
+        ``last_hit`` to ``"obstacle"`` or ``"person:<id>"``."""
+        crowd = world.people
+        if len(crowd) and crowd.near(pose.x, pose.y, self._reach):
+            pid = crowd.hit_by(pose.transform_points(self.samples))
+            if pid is not None:
+                self.last_hit = f"person:{pid}"
+                return True
         if world.clearance_at(pose.x, pose.y) > self._reach:
             return False  # open space: no obstacle within the footprint's circumscribed circle
-        return world.raycaster.any_occupied_at_pose(self.samples, pose.x, pose.y, pose.theta)
+        if world.raycaster.any_occupied_at_pose(self.samples, pose.x, pose.y, pose.theta):
+            self.last_hit = "obstacle"
+            return True
+        return False
 
     def step(self, world: World, target: Twist2D, dt: float) -> bool:
-        """Advance one substep toward ``target``; returns True on a collision."""
+        """Advance one substep toward ``target``; returns True on a collision.
+
+        At rest (motors and command exactly zero) at a pose already found free in an unchanged world
+        with nobody near, nothing can move or touch: the step is skipped (an idle robot costs a few
+        attribute reads per substep). The slip noise is still drawn so that a seed gives the same
+        run whether or not the robot paused."""
         lim = self.profile.limits
         v = self.velocity
+        if (
+            self._rest is not None
+            and self._rest[0] is self.pose
+            and self._rest[1] == world.version
+            and v.vx == 0.0
+            and v.vy == 0.0
+            and v.wz == 0.0
+            and target.vx == 0.0
+            and target.vy == 0.0
+            and target.wz == 0.0
+            and not (len(world.people) and world.people.near(self.pose.x, self.pose.y, self._reach + 0.5))
+        ):
+            if self.options.slip_noise_std > 0:
+                self.noise.next(), self.noise.next(), self.noise.next()
+            self.last_accel = (0.0, 0.0)
+            self.true_yaw_rate = 0.0
+            return False
         omni = self.profile.is_omni
         vx = _approach(v.vx, target.vx, lim.acc_lim_x, abs(lim.decel_lim_x), dt)
         vy = (
@@ -174,6 +212,8 @@ class SimBody:
         self.velocity = motor
         self.pose = candidate
         self.true_yaw_rate = body.wz
+        at_rest = vx == 0.0 and vy == 0.0 and wz == 0.0 and v.vx == 0.0 and v.vy == 0.0 and v.wz == 0.0
+        self._rest = (candidate, world.version) if at_rest else None
         return False
 
     def _rim_speeds(self, t: Twist2D) -> np.ndarray:

@@ -1,6 +1,10 @@
 """The simulated world: a static occupancy grid (from a map_server PGM + YAML) plus optional polygon
-obstacles rasterized into it, exposed as one boolean ``occupied`` mask for ray casting and
-collision checks. Moving obstacles can later be layered on top of ``static_occupied``."""
+obstacles rasterized into it, and the people walking in it (``robot.sim.people.Crowd``).
+
+The ray caster and the clearance map are built from ``static_occupied`` only (once per world state);
+people are cast against analytically and taken as the minimum, so walking people never invalidate the
+static tables. ``occupied`` is the static mask OR the people's rasterized discs, for consumers that want
+one grid."""
 
 from __future__ import annotations
 
@@ -50,11 +54,8 @@ def points_in_polygon(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
 
 @dataclass
 class World:
-    """A static grid world. ``occupied`` is what the lidar sees and the body collides with.
-
-    To add moving obstacles later (people as discs), override ``occupied`` to OR them into
-    ``static_occupied`` and reset the ``raycaster`` / ``clearance_map`` caches when they move
-    (``add_polygon`` shows the pattern)."""
+    """A grid world with people. ``occupied`` (static | people) is what the lidar sees and the body
+    collides with; ``static_occupied`` backs the cached ``raycaster`` and ``clearance_map``."""
 
     grid: OccupancyGrid
     name: str = "world"
@@ -71,22 +72,29 @@ class World:
         self.static_occupied = occ
         self._caster: RayCaster | None = None
         self._clearance: np.ndarray | None = None
+        from robot.sim.people import Crowd
+
+        self.people = Crowd(self)
+        self.features: list[tuple[str, np.ndarray]] = []  # (kind, polygon) added by a scenario
+        self._occ_cache: tuple[int, np.ndarray] | None = None
+        self.version = 0  # bumped when the static world changes (add_polygon)
 
     @property
     def raycaster(self) -> RayCaster:
-        """A ``RayCaster`` over ``occupied``, rebuilt only when the world changes."""
+        """A ``RayCaster`` over ``static_occupied``, rebuilt only when the static world changes
+        (people are cast separately: ``people.ranges``)."""
         if self._caster is None:
-            self._caster = RayCaster(self.occupied, self.geometry, clearance=self.clearance_map)
+            self._caster = RayCaster(self.static_occupied, self.geometry, clearance=self.clearance_map)
         return self._caster
 
     @property
     def clearance_map(self) -> np.ndarray:
-        """(H, W) metres from each cell centre to the nearest occupied cell centre (Euclidean
-        distance transform, computed once per world state)."""
+        """(H, W) metres from each cell centre to the nearest statically occupied cell centre
+        (Euclidean distance transform, computed once per static world state; people excluded)."""
         if self._clearance is None:
             from scipy.ndimage import distance_transform_edt
 
-            occ = self.occupied
+            occ = self.static_occupied
             if occ.any():
                 self._clearance = distance_transform_edt(~occ) * self.geometry.resolution
             else:
@@ -94,7 +102,7 @@ class World:
         return self._clearance
 
     def clearance_at(self, x: float, y: float) -> float:
-        """A lower bound on the distance (m) from world point (x, y) to any occupied cell; 0 if the
+        """A lower bound on the distance (m) from world point (x, y) to any static obstacle; 0 if the
         point is off the grid (unknown surroundings). Scalar math: used to skip exact checks in
         open space every physics substep."""
         g = self.geometry
@@ -110,9 +118,9 @@ class World:
         return max(0.0, float(self.clearance_map[row, col]) - g.resolution * math.sqrt(2.0))
 
     def any_occupied(self, xy: np.ndarray) -> bool:
-        """True if any of the (N, 2) world points lies in an occupied cell (off-grid is free).
-        Uses the ray caster's padded table so the hot collision check is a handful of numpy ops."""
-        return self.raycaster.any_occupied(xy)
+        """True if any of the (N, 2) world points lies in an occupied cell or a person (off-grid is
+        free). Uses the ray caster's padded table so the hot collision check is a handful of numpy ops."""
+        return self.raycaster.any_occupied(xy) or bool(self.people.contains(xy).any())
 
     @property
     def geometry(self) -> GridGeometry:
@@ -120,16 +128,25 @@ class World:
 
     @property
     def occupied(self) -> np.ndarray:
-        """(H, W) bool obstacle mask (static map + rasterized polygons)."""
-        return self.static_occupied
+        """(H, W) bool obstacle mask: static map + rasterized polygons + people's discs (the
+        raster is cached until someone moves)."""
+        if not len(self.people):
+            return self.static_occupied
+        v = self.people.version
+        if self._occ_cache is None or self._occ_cache[0] != v:
+            self._occ_cache = (v, self.static_occupied | self.people.mask(self.geometry))
+        return self._occ_cache[1]
 
-    def add_polygon(self, polygon: np.ndarray | list[tuple[float, float]]) -> None:
-        """Rasterize a polygon obstacle ((N, 2) world points) into the world."""
-        self.static_occupied = self.static_occupied | polygon_mask(
-            self.geometry, np.asarray(polygon, dtype=float)
-        )
+    def add_polygon(self, polygon: np.ndarray | list[tuple[float, float]], kind: str = "obstacle") -> None:
+        """Rasterize a polygon obstacle ((N, 2) world points) into the static world. ``kind`` labels
+        it for the 3D view (``obstacle``, ``mound``, ``puddle``)."""
+        poly = np.asarray(polygon, dtype=float)
+        self.static_occupied = self.static_occupied | polygon_mask(self.geometry, poly)
+        self.features.append((kind, poly.reshape(-1, 2)))
         self._caster = None
         self._clearance = None
+        self._occ_cache = None
+        self.version += 1
 
     def is_free(self, xy: np.ndarray) -> np.ndarray:
         """True for (N, 2) world points in free cells; points off the grid count as free."""
@@ -140,11 +157,21 @@ class World:
         return out
 
     @classmethod
-    def from_yaml(cls, path: str | Path, **kwargs: object) -> World:
-        """Load a map_server YAML; a ``navdeck_start: [x, y, theta]`` key sets the start pose."""
+    def from_yaml(cls, path: str | Path, scenario: bool | str | Path = False, **kwargs: object) -> World:
+        """Load a map_server YAML; a ``navdeck_start: [x, y, theta]`` key sets the start pose.
+        ``scenario``: True loads the sidecar ``<stem>.scenario.toml`` next to the YAML (people,
+        mounds, puddles; see ``robot.sim.scenario``), a path loads that file. Off by default so the
+        simulated world matches its map unless a scenario is asked for."""
         from maps.mapio import load_map_yaml, read_map_metadata
 
         path = Path(path)
+        if scenario:
+            from robot.sim.scenario import load_scenario, sidecar_path
+
+            spec = load_scenario(sidecar_path(path) if scenario is True else Path(scenario))  # type: ignore[arg-type]
+            world = cls.from_yaml(path, **kwargs)
+            spec.apply(world)
+            return world
         grid = load_map_yaml(path)
         start = read_map_metadata(path).get("navdeck_start")
         start_pose = Pose2D.from_array(start) if isinstance(start, list) and len(start) == 3 else Pose2D()
@@ -153,11 +180,12 @@ class World:
         return cls(grid, **kwargs)  # type: ignore[arg-type]
 
     @classmethod
-    def stock(cls, name: str, **kwargs: object) -> World:
-        """One of the stock worlds in ``maps/stock`` (apartment, office, greenhouse)."""
+    def stock(cls, name: str, scenario: bool = False, **kwargs: object) -> World:
+        """One of the stock worlds in ``maps/stock`` (apartment, office, greenhouse); ``scenario``
+        adds its people and obstacles from ``maps/stock/<name>.scenario.toml``."""
         from maps.stock import stock_world_path
 
-        return cls.from_yaml(stock_world_path(name), **kwargs)
+        return cls.from_yaml(stock_world_path(name), scenario=scenario, **kwargs)
 
     @classmethod
     def box(cls, width: float, height: float, resolution: float = 0.05, wall: float = 0.1) -> World:
