@@ -93,3 +93,16 @@ def scan_points(scan: LaserScan, laser_pose: Pose2D, z: float = 0.0) -> tuple[np
     pts[:, :2] = xy
     pts[:, 2] = z
     return pts, r
+
+
+def disc_segments(discs: np.ndarray, z: float, sides: int = 16) -> np.ndarray:
+    """(P, 4) discs (x, y, heading, radius) -> (P * (sides + 1), 2, 3): outlines plus a heading tick."""
+    a = np.linspace(0.0, 2.0 * np.pi, sides + 1)
+    x, y, th, r = (discs[:, i : i + 1] for i in range(4))
+    ring = np.stack((x + r * np.cos(a), y + r * np.sin(a)), axis=-1)  # (P, sides+1, 2)
+    seg = np.stack((ring[:, :-1], ring[:, 1:]), axis=2)  # (P, sides, 2, 2)
+    centre = np.concatenate((x, y), axis=1)
+    nose = np.concatenate((x + r * np.cos(th), y + r * np.sin(th)), axis=1)
+    tick = np.stack((centre, nose), axis=1)[:, None]  # (P, 1, 2, 2)
+    both = np.concatenate((seg, tick), axis=1).reshape(-1, 2, 2)
+    return np.concatenate((both, np.full((*both.shape[:2], 1), z)), axis=-1).astype(np.float32)

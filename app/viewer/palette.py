@@ -113,3 +113,5 @@ WAYPOINTS = (255, 220, 0)
 PARTICLES = (255, 40, 40)  # AMCL particle cloud: red arrows
 GRAPH_EDGES = (0, 200, 255)
 PREVIEW = (80, 255, 80)
+
+PEOPLE = (255, 140, 0)  # simulated people (orange discs)

@@ -58,6 +58,7 @@ LAYERS: dict[str, str] = {
     "Goal & waypoints": "/goal",
     "Particles": "/particles",
     "Loop closures": "/graph/edges",
+    "People": "/people",
 }
 
 
@@ -256,6 +257,7 @@ class Viewer:
             head_length=0.04,
             visible=False,
         )
+        h["/people"] = self._lines("/people", palette.PEOPLE, 2.5)
         h["/graph"] = s.add_frame("/graph", show_axes=False)
         h["/graph/edges"] = self._lines("/graph/edges", palette.GRAPH_EDGES, 2.0)
         h["/input/preview"] = s.add_arrows(
@@ -402,6 +404,14 @@ class Viewer:
                     snap.particles, o.particle_arrow_length, 0.02, o.max_particles
                 )
             self._set_data("/particles", present)
+
+        people = snap.extras.get("people")  # (P, 4): x, y, heading, radius (simulated people)
+        if people is not last.get("people"):
+            last["people"] = people
+            present = people is not None and len(people) > 0
+            if present:
+                h["/people"].points = geo.disc_segments(np.asarray(people, dtype=float), 0.02)
+            self._set_data("/people", present)
 
         edges = snap.extras.get("graph_edges")
         if edges is not last.get("edges"):

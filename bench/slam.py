@@ -1,0 +1,108 @@
+"""SLAM benchmarks: front-end time per 360-beam scan, 2000-pose graph optimization, and (slow group)
+the Freiburg benchmark logs scored with the Kümmerle et al. 2009 metric."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bench.core import Benchmark, Figure
+
+DATA = Path("/work/shared/datasets/slam_benchmark_2d")
+# published GMapping numbers (Kümmerle et al. 2009) and our targets
+TARGETS = {"intel": (0.05, 1.5), "aces": (0.060, None), "fr079": (0.061, None)}
+
+
+def front_end() -> list[Figure]:
+    from nav.slam.synthetic import LOOP_WAYPOINTS, box_world, cast_scan, loop_trajectory
+    from nav.slam.system import GraphSlam, SlamOptions
+    from nav.types import Pose2D
+
+    grid, res = box_world()
+    truth = loop_trajectory(LOOP_WAYPOINTS, 0.1)[:200]
+    scans = [cast_scan(grid, res, Pose2D.from_array(p), 360, stamp=0.2 * k) for k, p in enumerate(truth)]
+    slam = GraphSlam(SlamOptions())
+    times = []
+    for k, scan in enumerate(scans):
+        t0 = time.process_time()
+        slam.add_scan(scan, Pose2D.from_array(truth[k]))
+        times.append(time.process_time() - t0)
+    ms = 1e3 * float(np.mean(times[10:]))
+    p95 = 1e3 * float(np.percentile(times[10:], 95))
+    return [
+        Figure("front-end per scan (360 beams, mean)", ms, "ms", "< 30 ms", ms < 30),
+        Figure("front-end per scan (p95)", p95, "ms", "", None),
+    ]
+
+
+def optimize_2000() -> list[Figure]:
+    from nav.slam.pose_graph import EdgeSet, optimize_pose_graph
+
+    rng = np.random.default_rng(0)
+    n = 2000
+    t = np.linspace(0, 8 * np.pi, n)
+    truth = np.column_stack((10 * np.cos(t), 10 * np.sin(t), (t + 1.5 * np.pi) % (2 * np.pi) - np.pi))
+
+    def rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+        dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
+        return np.column_stack(
+            (c * dx + s * dy, -s * dx + c * dy, (b[:, 2] - a[:, 2] + np.pi) % (2 * np.pi) - np.pi)
+        )
+
+    i = np.arange(n - 1)
+    z = rel(truth[i], truth[i + 1]) + rng.normal(0, [0.02, 0.02, 0.005], (n - 1, 3))
+    li = np.arange(0, n - n // 4, 5)
+    lj = li + n // 4
+    edges = EdgeSet(
+        np.concatenate((i, li)),
+        np.concatenate((i + 1, lj)),
+        np.vstack((z, rel(truth[li], truth[lj]))),
+        np.tile([50.0, 50.0, 100.0], (n - 1 + len(li), 1)),
+        np.concatenate((np.zeros(n - 1, bool), np.ones(len(li), bool))),
+    )
+    x0 = truth + rng.normal(0, [0.3, 0.3, 0.05], truth.shape)
+    t0 = time.process_time()
+    optimize_pose_graph(x0, edges)
+    s = time.process_time() - t0
+    return [Figure("optimize 2000 poses", s, "s", "< 0.5 s", s < 0.5)]
+
+
+def _log(name: str) -> list[Figure]:
+    from nav.slam.metric import parse_relations, score_trajectory
+    from nav.slam.offline import run_offline
+    from robot.logs.reader import load_log
+
+    t0 = time.process_time()
+    recs, laser = load_log(DATA / "bags" / f"{name}.orig.bag")
+    slam = run_offline(recs, laser)
+    traj = slam.trajectory()
+    cpu = time.process_time() - t0
+    score = score_trajectory(traj, parse_relations((DATA / "relations" / f"{name}.relations").read_text()))
+    rate = (float(recs[-1].stamp) - float(recs[0].stamp)) / cpu
+    t_goal, r_goal = TARGETS[name]
+    return [
+        Figure(
+            f"{name} translational error", score.trans_mean, "m", f"<= {t_goal}", score.trans_mean <= t_goal
+        ),
+        Figure(f"{name} translational std", score.trans_std, "m"),
+        Figure(
+            f"{name} rotational error",
+            score.rot_mean_deg,
+            "deg",
+            f"<= {r_goal}" if r_goal else "",
+            score.rot_mean_deg <= r_goal if r_goal else None,
+        ),
+        Figure(f"{name} speed vs recording (1 core)", rate, "x", ">= 10x", rate >= 10),
+    ]
+
+
+BENCHMARKS = [
+    Benchmark(name="slam.front_end", run=front_end),
+    Benchmark(name="slam.optimize_2000", run=optimize_2000),
+    Benchmark(name="slam.intel", run=lambda: _log("intel"), group="slow"),
+    Benchmark(name="slam.aces", run=lambda: _log("aces"), group="slow"),
+    Benchmark(name="slam.fr079", run=lambda: _log("fr079"), group="slow"),
+]

@@ -1,0 +1,210 @@
+"""Log-odds occupancy grid with vectorized free-space ray tracing.
+
+The classic binary Bayes filter in log-odds form (Thrun, Burgard, Fox, *Probabilistic Robotics*,
+ch. 9.2; Moravec & Elfes 1985): every cell keeps ``l = log(p / (1 - p))``; a hit adds ``l_occ``, a
+ray passing through adds ``l_free``, and ``l`` is clamped so the map can change its mind later
+(Cartographer's ``min/max probability`` play the same role).
+
+Free space is traced by sampling every ray at sub-cell steps all at once (``np.repeat`` over the
+ray lengths), so there is no per-beam Python loop. Each cell is updated at most once per scan
+(per ``group``), like Cartographer's update markers, so a cell crossed by many beams of one scan is
+not over-counted. The grid grows (re-allocates with a margin) when the robot explores past its edge.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nav.types import GridGeometry, OccupancyGrid, Pose2D
+
+
+def prob_to_logodds(p: float) -> float:
+    return math.log(p / (1.0 - p))
+
+
+@dataclass(frozen=True)
+class LogOddsOptions:
+    """Options of :class:`LogOddsGrid` (gmapping / Cartographer probability-grid equivalents)."""
+
+    resolution: float = 0.05
+    """Cell size (m). Nav2 / slam_toolbox ``resolution`` default 0.05."""
+    hit_probability: float = 0.7
+    """Probability a hit endpoint implies occupancy (Cartographer ``hit_probability``; 0.55 there)."""
+    miss_probability: float = 0.4
+    """Probability a traversed cell is occupied (Cartographer ``miss_probability`` 0.49)."""
+    min_probability: float = 0.12
+    """Clamp floor (Cartographer ``min_probability`` 0.12... keeps the map able to change)."""
+    max_probability: float = 0.97
+    """Clamp ceiling (Cartographer ``max_probability`` 0.97)."""
+    step_fraction: float = 0.5
+    """Ray sampling step as a fraction of ``resolution``: < 1 so no crossed cell is skipped."""
+    grow_margin: float = 5.0
+    """Extra room (m) added on each side when the grid must grow."""
+
+    @property
+    def l_occ(self) -> float:
+        return prob_to_logodds(self.hit_probability)
+
+    @property
+    def l_free(self) -> float:
+        return prob_to_logodds(self.miss_probability)
+
+    @property
+    def l_min(self) -> float:
+        return prob_to_logodds(self.min_probability)
+
+    @property
+    def l_max(self) -> float:
+        return prob_to_logodds(self.max_probability)
+
+
+def trace_rays(origins: np.ndarray, ends: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
+    """Sample points along every segment ``origins[i] -> ends[i]`` (excluding the end point).
+
+    Returns ``(points (M, 2), ray index (M,))``. Vectorized: the sample counts per ray are expanded
+    with ``np.repeat`` rather than looping over rays.
+    """
+    d = ends - origins
+    length = np.hypot(d[:, 0], d[:, 1])
+    n = np.maximum(np.ceil(length / step).astype(np.int64), 1)
+    ray = np.repeat(np.arange(len(n)), n)
+    start = np.cumsum(n) - n
+    k = np.arange(ray.size) - np.repeat(start, n)
+    frac = k / n[ray]
+    pts = origins[ray] + d[ray] * frac[:, None]
+    return pts, ray
+
+
+@dataclass(frozen=True)
+class InsertResult:
+    """What one insertion changed, so derived layers (likelihood fields) can update incrementally."""
+
+    became_occupied: np.ndarray
+    """Flat cell indices whose log-odds crossed from <= 0 to > 0."""
+    became_free: int
+    """How many cells crossed from > 0 to <= 0."""
+    resized: bool
+    """The grid was re-allocated (flat indices of earlier results are no longer valid)."""
+
+
+class LogOddsGrid:
+    """A growing log-odds occupancy grid in an axis-aligned frame (the map or a submap frame)."""
+
+    def __init__(
+        self,
+        options: LogOddsOptions | None = None,
+        origin_xy: tuple[float, float] = (0.0, 0.0),
+        width: int = 0,
+        height: int = 0,
+    ) -> None:
+        self.options = options or LogOddsOptions()
+        self.resolution = self.options.resolution
+        self.origin = np.array(origin_xy, dtype=float)
+        self.logodds = np.zeros((height, width), dtype=np.float32)
+        self.seen = np.zeros((height, width), dtype=bool)
+
+    # -- geometry ---------------------------------------------------------------------------------
+    @property
+    def shape(self) -> tuple[int, int]:
+        return self.logodds.shape  # type: ignore[return-value]
+
+    @property
+    def geometry(self) -> GridGeometry:
+        h, w = self.shape
+        return GridGeometry(self.resolution, w, h, Pose2D(float(self.origin[0]), float(self.origin[1]), 0.0))
+
+    def cells(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """World points -> integer (rows, cols) (may be out of bounds)."""
+        c = np.floor((xy - self.origin) / self.resolution).astype(np.int64)
+        return c[:, 1], c[:, 0]
+
+    def ensure_contains(self, xy: np.ndarray) -> None:
+        """Grow (re-allocate, keeping contents) so that all (N, 2) points fall inside."""
+        if xy.size == 0:
+            return
+        lo = xy.min(axis=0)
+        hi = xy.max(axis=0)
+        h, w = self.shape
+        cur_lo = self.origin
+        cur_hi = self.origin + self.resolution * np.array([w, h])
+        if w > 0 and h > 0 and np.all(lo >= cur_lo) and np.all(hi < cur_hi):
+            return
+        m = self.options.grow_margin
+        if w == 0 or h == 0:
+            new_lo, new_hi = lo - m, hi + m
+        else:
+            new_lo = np.where(lo < cur_lo, lo - m, cur_lo)
+            new_hi = np.where(hi >= cur_hi, hi + m, cur_hi)
+        # keep the new origin on the old cell lattice so existing cells copy exactly
+        shift = (
+            np.ceil((self.origin - new_lo) / self.resolution).astype(np.int64)
+            if w and h
+            else np.zeros(2, int)
+        )
+        new_origin = self.origin - shift * self.resolution if w and h else new_lo
+        size = np.ceil((new_hi - new_origin) / self.resolution).astype(np.int64) + 1
+        lo_new = np.zeros((size[1], size[0]), dtype=np.float32)
+        seen_new = np.zeros((size[1], size[0]), dtype=bool)
+        if w and h:
+            lo_new[shift[1] : shift[1] + h, shift[0] : shift[0] + w] = self.logodds
+            seen_new[shift[1] : shift[1] + h, shift[0] : shift[0] + w] = self.seen
+        self.logodds, self.seen, self.origin = lo_new, seen_new, np.asarray(new_origin, dtype=float)
+
+    # -- updates ----------------------------------------------------------------------------------
+    def insert_rays(self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray) -> InsertResult:
+        """Integrate one scan's rays ``origins[i] -> ends[i]`` (grid frame). ``hit[i]`` marks the end
+        as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
+
+        Each cell is updated once: hit cells by ``l_occ``, other traversed cells by ``l_free``.
+        Duplicates are removed with a scratch mark array over the grid (O(cells), no sort)."""
+        origins = np.asarray(origins, dtype=float).reshape(-1, 2)
+        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+        if ends.shape[0] == 0:
+            return InsertResult(np.zeros(0, np.int64), 0, False)
+        if origins.shape[0] == 1 and ends.shape[0] > 1:
+            origins = np.broadcast_to(origins, ends.shape)
+        hit = np.asarray(hit, dtype=bool)
+        old_shape = self.shape
+        self.ensure_contains(np.vstack((origins, ends)))
+        h, w = self.shape
+        opt = self.options
+        pts, _ = trace_rays(origins, ends, self.resolution * opt.step_fraction)
+        fr, fc = self.cells(pts)
+        hr, hc = self.cells(ends[hit])
+        mark = np.zeros(h * w, dtype=np.int8)
+        mark[fr * w + fc] = 1
+        mark[hr * w + hc] = 2  # a hit wins over a pass-through in the same scan
+        flat = self.logodds.reshape(-1)
+        touched = np.flatnonzero(mark)
+        before = flat[touched] > 0.0
+        delta = np.where(mark[touched] == 2, np.float32(opt.l_occ), np.float32(opt.l_free))
+        flat[touched] = np.clip(flat[touched] + delta, opt.l_min, opt.l_max)
+        after = flat[touched] > 0.0
+        self.seen.reshape(-1)[touched] = True
+        return InsertResult(
+            touched[after & ~before], int(np.count_nonzero(before & ~after)), self.shape != old_shape
+        )
+
+    def insert_scan(self, sensor_pose: Pose2D, points: np.ndarray, misses: np.ndarray | None = None) -> None:
+        """Integrate one scan: ``points`` (N, 2) returns and optional ``misses`` (M, 2) no-return
+        ray ends, both in the sensor frame whose pose in this grid's frame is ``sensor_pose``."""
+        ends = sensor_pose.transform_points(points) if len(points) else np.zeros((0, 2))
+        hit = np.ones(len(ends), dtype=bool)
+        if misses is not None and len(misses):
+            ends = np.vstack((ends, sensor_pose.transform_points(misses)))
+            hit = np.concatenate((hit, np.zeros(len(misses), dtype=bool)))
+        return self.insert_rays(np.array([[sensor_pose.x, sensor_pose.y]]), ends, hit)
+
+    # -- views ------------------------------------------------------------------------------------
+    def probability(self) -> np.ndarray:
+        """Occupancy probability per cell (0.5 where never seen)."""
+        return 1.0 / (1.0 + np.exp(-self.logodds.astype(np.float64)))
+
+    def to_occupancy_grid(self) -> OccupancyGrid:
+        """nav_msgs/OccupancyGrid values: -1 never observed, else round(100 * p)."""
+        data = np.rint(100.0 * self.probability()).astype(np.int8)
+        data[~self.seen] = -1
+        return OccupancyGrid(self.geometry, data)

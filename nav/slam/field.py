@@ -1,0 +1,125 @@
+"""Smoothed likelihood field of an occupancy grid, plus max-pooled copies for coarse-to-fine search.
+
+The field is the likelihood-field sensor model (Thrun et al., *Probabilistic Robotics* 6.4):
+``F = exp(-d^2 / (2 sigma^2))`` with ``d`` the distance to the nearest occupied cell. It is smooth,
+so the least-squares refinement has useful gradients several cells away (the role Cartographer's
+bicubic interpolation and Olson's blurred rasterized lookup table play). ``pooled[k]`` holds, for
+each cell, the max of ``F`` over the ``2^k x 2^k`` block starting there: a score computed on it is an
+upper bound of every finer offset inside that block (Hess et al. 2016, sec. V.C precomputation grids).
+Interpolation is bilinear with its analytic gradient, for the least-squares refinement.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from nav.grid import LogOddsGrid
+
+
+def _kernel(sigma: float, resolution: float) -> np.ndarray:
+    """(K, 3) integer offsets (dy, dx) within 3 sigma and their weights exp(-d^2 / 2 sigma^2)."""
+    rad = max(1, int(np.ceil(3.0 * sigma / resolution)))
+    dy, dx = np.mgrid[-rad : rad + 1, -rad : rad + 1]
+    d2 = (dy * dy + dx * dx) * resolution**2
+    keep = d2 <= (3.0 * sigma) ** 2
+    return np.column_stack((dy[keep], dx[keep], np.exp(-0.5 * d2[keep] / sigma**2)))
+
+
+class LikelihoodField:
+    """``F`` sampled on the grid's cells; ``origin`` is the world point of cell (0, 0)'s corner."""
+
+    sigma: float = 0.05
+
+    def __init__(self, field: np.ndarray, origin: np.ndarray, resolution: float, levels: int = 0) -> None:
+        self.field = np.ascontiguousarray(field, dtype=np.float32)
+        self.origin = np.asarray(origin, dtype=float)
+        self.resolution = float(resolution)
+        self.pooled: list[np.ndarray] = [self.field]
+        self.ensure_levels(levels)
+
+    @classmethod
+    def from_grid(cls, grid: LogOddsGrid, sigma: float = 0.05, levels: int = 0) -> LikelihoodField:
+        """Field of a log-odds grid; cells with ``l > 0`` count as occupied; ``sigma`` in metres.
+
+        The Gaussian is truncated at 3 sigma, so ``F`` is a max of small kernels: built by a few
+        shifted maxima here, and updated by splatting only the newly occupied cells afterwards
+        (:meth:`splat`)."""
+        occ = grid.logodds > 0.0
+        f = np.zeros(grid.shape, dtype=np.float32)
+        rows = np.flatnonzero(occ.any(axis=1))
+        if rows.size:
+            cols = np.flatnonzero(occ.any(axis=0))
+            k = _kernel(sigma, grid.resolution)
+            rad = int(np.abs(k[:, :2]).max())
+            # work on the bounding box of the occupied cells (plus the kernel radius) only
+            r0, r1 = max(rows[0] - rad, 0), min(rows[-1] + rad + 1, occ.shape[0])
+            c0, c1 = max(cols[0] - rad, 0), min(cols[-1] + rad + 1, occ.shape[1])
+            sub = f[r0:r1, c0:c1]
+            occf = occ[r0:r1, c0:c1].astype(np.float32)
+            h, w = occf.shape
+            for dyf, dxf, wt in k:
+                dy, dx = int(dyf), int(dxf)
+                ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
+                xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
+                np.maximum(sub[yd, xd], np.float32(wt) * occf[ys, xs], out=sub[yd, xd])
+        obj = cls(f, grid.origin, grid.resolution, levels)
+        obj.sigma = sigma
+        return obj
+
+    def splat(self, cells: np.ndarray) -> None:
+        """Raise ``F`` around newly occupied flat ``cells`` (same grid shape); drops pooled levels."""
+        if cells.size == 0:
+            return
+        h, w = self.field.shape
+        r0, c0 = np.divmod(cells, w)
+        k = _kernel(self.sigma, self.resolution)
+        r = r0[:, None] + k[:, 0][None, :].astype(np.int64)
+        c = c0[:, None] + k[:, 1][None, :].astype(np.int64)
+        wt = np.broadcast_to(k[:, 2][None, :], r.shape)
+        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
+        np.maximum.at(self.field.reshape(-1), (r * w + c)[ok], wt[ok].astype(self.field.dtype))
+        self.pooled = [self.field]
+
+    def ensure_levels(self, levels: int) -> None:
+        """Build max-pooled grids up to ``2^levels`` cells wide."""
+        while len(self.pooled) <= levels:
+            prev = self.pooled[-1]
+            s = 1 << (len(self.pooled) - 1)
+            p = np.pad(prev, ((0, s), (0, s)))
+            self.pooled.append(
+                np.maximum(np.maximum(p[:-s, :-s], p[s:, :-s]), np.maximum(p[:-s, s:], p[s:, s:]))
+            )
+
+    def lookup(self, level: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
+        """``pooled[level]`` at integer cells; zero outside the grid."""
+        g = self.pooled[level]
+        h, w = g.shape
+        ok = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        flat = g.reshape(-1)
+        return np.where(ok, flat[np.where(ok, rows * w + cols, 0)], 0.0)
+
+    def interpolate(self, xy: np.ndarray) -> np.ndarray:
+        """Bilinear interpolation of ``F`` at (N, 2) world points (cell centres are the samples);
+        zero outside. ``F`` is already Gaussian-smooth, so bilinear is enough (and cheap)."""
+        return self.interpolate_grad(xy)[0]
+
+    def interpolate_grad(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``F`` and its analytic bilinear world-frame gradient (N, 2) at (N, 2) points."""
+        g = self.field
+        h, w = g.shape
+        c = (xy - self.origin) / self.resolution - 0.5
+        c0 = np.floor(c).astype(np.int64)
+        f = c - c0
+        x0, y0 = c0[:, 0], c0[:, 1]
+        ok = (x0 >= 0) & (x0 < w - 1) & (y0 >= 0) & (y0 < h - 1)
+        idx = np.where(ok, y0 * w + x0, 0)
+        flat = g.reshape(-1)
+        v00, v01 = flat[idx], flat[idx + 1]
+        v10, v11 = flat[idx + w], flat[idx + w + 1]
+        fx, fy = f[:, 0], f[:, 1]
+        top = v00 + fx * (v01 - v00)
+        bot = v10 + fx * (v11 - v10)
+        val = np.where(ok, top + fy * (bot - top), 0.0)
+        gx = np.where(ok, (1 - fy) * (v01 - v00) + fy * (v11 - v10), 0.0) / self.resolution
+        gy = np.where(ok, bot - top, 0.0) / self.resolution
+        return val, np.column_stack((gx, gy))

@@ -1,0 +1,168 @@
+"""Scan-to-map matching: correlative search then least-squares refinement.
+
+- :func:`correlative_search`: real-time correlative scan matching (Olson 2009) over an
+  (x, y, theta) window around a prior, vectorized over all candidate poses and points at once.
+  Coarse-to-fine over max-pooled fields (Hess et al. 2016's branch-and-bound bounds, evaluated as a
+  beam: the best ``beam`` candidates of each level are split into their 4 children), so a wide
+  loop-closure window costs little more than a small front-end window.
+- :func:`refine_pose`: Gauss-Newton on ``sum (1 - F(T p_i))^2 / N`` plus translation and rotation
+  priors (Cartographer's CeresScanMatcher2D: occupied_space_weight, translation_weight,
+  rotation_weight) over the smooth likelihood field.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from nav.slam.field import LikelihoodField
+from nav.types import Pose2D, wrap_angle
+
+
+class ScanMatchError(RuntimeError):
+    """The scan could not be matched (no points, or an empty map)."""
+
+
+@dataclass(frozen=True)
+class SearchWindow:
+    """Search window of :func:`correlative_search` (Cartographer RealTimeCorrelativeScanMatcher names)."""
+
+    linear_search_window: float = 0.1
+    """Half-width of the translation window (m)."""
+    angular_search_window: float = math.radians(10.0)
+    """Half-width of the rotation window (rad)."""
+    angular_step: float = math.radians(0.5)
+    """Angle step (rad); Olson's rule is about resolution / max range."""
+    levels: int = 0
+    """Coarse-to-fine levels (0 = exhaustive at full resolution)."""
+    beam: int = 48
+    """Candidates kept per level when ``levels > 0``."""
+    max_points: int = 100
+    """The search scores at most this many points (evenly thinned); refinement uses all."""
+
+
+@dataclass(frozen=True)
+class RefineOptions:
+    """Options of :func:`refine_pose` (Cartographer ceres_scan_matcher defaults in spirit)."""
+
+    occupied_space_weight: float = 1.0
+    translation_weight: float = 10.0
+    rotation_weight: float = 40.0
+    max_iterations: int = 20
+    tolerance: float = 1e-5
+
+
+def _rotations(pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
+    """(A, N, 2) points rotated by each angle."""
+    c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+    x, y = pts[None, :, 0], pts[None, :, 1]
+    return np.stack((c * x - s * y, s * x + c * y), axis=-1)
+
+
+def correlative_search(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow
+) -> tuple[Pose2D, float]:
+    """Best pose (on the search lattice) of points ``pts`` (N, 2, robot frame) in ``field``'s frame
+    and its score (mean field value, 0..1)."""
+    if pts.shape[0] == 0:
+        raise ScanMatchError("no points to match")
+    if pts.shape[0] > window.max_points:
+        pts = pts[np.linspace(0, pts.shape[0] - 1, window.max_points).astype(np.int64)]
+    res = field.resolution
+    na = math.ceil(window.angular_search_window / window.angular_step)
+    thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
+    rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
+    cell = np.floor((rot - field.origin) / res).astype(np.int64)
+    rows0, cols0 = cell[..., 1], cell[..., 0]  # (A, N)
+    wc = math.ceil(window.linear_search_window / res)
+    top = window.levels
+    field.ensure_levels(top)
+    s = 1 << top
+    blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
+    a_idx, by, bx = np.meshgrid(np.arange(len(thetas)), blocks, blocks, indexing="ij")
+    cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))  # (C, 3) at level `top`
+    n = pts.shape[0]
+    for level in range(top, -1, -1):
+        s = 1 << level
+        if level < top:  # split every kept candidate into its 4 children
+            kids = np.repeat(cand, 4, axis=0)
+            kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
+            kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
+            lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
+            inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
+            cand = kids[inside]  # a block meeting the window has at least one child that does
+        r = rows0[cand[:, 0]] + (cand[:, 1] * s)[:, None]
+        c = cols0[cand[:, 0]] + (cand[:, 2] * s)[:, None]
+        score = field.lookup(level, r, c).sum(axis=1) / n
+        if level > 0 and len(cand) > window.beam:
+            keep = np.argpartition(-score, window.beam)[: window.beam]
+            cand = cand[keep]
+        elif level == 0:
+            # tie-break towards the prior (smallest offset) for determinism
+            dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
+            best = np.lexsort((dist, -score))[0]
+            a, dy, dx = cand[best]
+            return Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a]))), float(
+                score[best]
+            )
+    raise AssertionError("unreachable")
+
+
+def refine_pose(
+    field: LikelihoodField,
+    pts: np.ndarray,
+    initial: Pose2D,
+    prior: Pose2D,
+    options: RefineOptions = RefineOptions(),
+) -> tuple[Pose2D, float]:
+    """Gauss-Newton refinement of ``initial``; returns the pose and its mean field score."""
+    if pts.shape[0] == 0:
+        raise ScanMatchError("no points to match")
+    x = initial.as_array().astype(float)
+    p0 = prior.as_array()
+    n = pts.shape[0]
+    wo = math.sqrt(options.occupied_space_weight / n)
+    wt, wr = options.translation_weight, options.rotation_weight
+    px, py = pts[:, 0], pts[:, 1]
+    for _ in range(options.max_iterations):
+        c, s = math.cos(x[2]), math.sin(x[2])
+        world = np.column_stack((c * px - s * py + x[0], s * px + c * py + x[1]))
+        f, g = field.interpolate_grad(world)
+        # residual r_i = wo (1 - F); dr/dx = -wo dF/dxy * dxy/dpose
+        dth = np.column_stack((-s * px - c * py, c * px - s * py))
+        j = np.empty((n + 3, 3))
+        j[:n, 0] = -wo * g[:, 0]
+        j[:n, 1] = -wo * g[:, 1]
+        j[:n, 2] = -wo * np.einsum("ij,ij->i", g, dth)
+        j[n:] = np.diag([wt, wt, wr])
+        r = np.concatenate(
+            (
+                wo * (1.0 - f),
+                [wt * (x[0] - p0[0]), wt * (x[1] - p0[1])],
+                [wr * float(wrap_angle(x[2] - p0[2]))],
+            )
+        )
+        h = j.T @ j + 1e-9 * np.eye(3)
+        step = -np.linalg.solve(h, j.T @ r)
+        x += step
+        if np.abs(step).max() < options.tolerance:
+            break
+    pose = Pose2D(float(x[0]), float(x[1]), float(wrap_angle(x[2])))
+    c, s = math.cos(pose.theta), math.sin(pose.theta)
+    world = np.column_stack((c * px - s * py + pose.x, s * px + c * py + pose.y))
+    return pose, float(field.interpolate(world).mean())
+
+
+def match_scan(
+    field: LikelihoodField,
+    pts: np.ndarray,
+    prior: Pose2D,
+    window: SearchWindow,
+    refine: RefineOptions = RefineOptions(),
+) -> tuple[Pose2D, float]:
+    """Correlative search around ``prior`` then least-squares refinement (the refinement is
+    regularized towards the correlative result, as Cartographer does)."""
+    coarse, _ = correlative_search(field, pts, prior, window)
+    return refine_pose(field, pts, coarse, coarse, refine)

@@ -1,0 +1,452 @@
+"""``GraphSlam``: the SLAM facade used live (control loop + worker thread) and offline (logs).
+
+Front end (``add_scan``, cheap, on the control loop): motion filter on odometry, scan-to-submap
+matching (correlative search + Gauss-Newton, Olson 2009 / Hess et al. 2016), insertion into the two
+active submaps. Back end (``run_backend``, on a worker): loop-closure search of recent nodes against
+finished submaps nearby, sparse pose-graph optimization with a Huber kernel, and re-rendering of the
+global map by re-placing the submaps at their optimized poses.
+
+Frames (REP-105): the front end tracks base_link in a drift-prone *local* frame; the back end
+estimates *map* poses; ``map_to_odom`` is what a tf broadcaster would publish.
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from nav.grid import LogOddsOptions
+from nav.slam.loop_closure import LoopCandidate, find_loop_closure
+from nav.slam.matcher import RefineOptions, ScanMatchError, SearchWindow, match_scan
+from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, optimize_pose_graph
+from nav.slam.render import render_submaps
+from nav.slam.submap import Submap
+from nav.types import LaserScan, OccupancyGrid, Pose2D
+
+_IDENTITY = Pose2D()
+
+
+class SlamError(RuntimeError):
+    """SLAM cannot continue (e.g. a scan without any usable return)."""
+
+
+@dataclass(frozen=True)
+class SlamOptions:
+    """Options of :class:`GraphSlam`. Names follow slam_toolbox / Cartographer where one exists;
+    defaults are tuned once for the Freiburg benchmark logs (same values for all three)."""
+
+    resolution: float = 0.05
+    """Map and submap cell size (m); slam_toolbox ``resolution`` 0.05."""
+    min_laser_range: float = 0.1
+    """Returns closer than this are dropped (m); slam_toolbox ``min_laser_range``."""
+    max_laser_range: float = 20.0
+    """Returns farther than this are used as free-space misses only (m); slam_toolbox 20.0."""
+    missing_data_ray_length: float = 5.0
+    """Length (m) of the free ray cast for a beam without return (Cartographer default 5)."""
+    minimum_travel_distance: float = 0.1
+    """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
+    minimum_travel_heading: float = math.radians(5.0)
+    """Motion filter: ... or this rotation (rad); slam_toolbox 0.5, Cartographer 1 deg."""
+    minimum_time_interval: float = 5.0
+    """Motion filter: ... or this much time (s) (Cartographer ``max_time_seconds`` 5)."""
+    submap_num_range_data: int = 40
+    """Nodes per submap before a new one starts; each submap holds 2x this (Cartographer 90)."""
+    voxel_filter_size: float = 0.05
+    """Matching points are thinned to one per cell of this size (m)."""
+    max_match_points: int = 200
+    """At most this many points are matched per scan."""
+    likelihood_sigma: float = 0.05
+    """Std-dev (m) of the likelihood field around occupied cells (Thrun et al. ``sigma_hit``)."""
+    linear_search_window: float = 0.1
+    """Front-end correlative window half-width (m)."""
+    angular_search_window: float = math.radians(10.0)
+    """Front-end correlative window half-width (rad)."""
+    angular_search_step: float = math.radians(0.5)
+    """Front-end correlative angle step (rad)."""
+    translation_weight: float = 10.0
+    """Least-squares pull towards the correlative result (Cartographer ``translation_weight`` 10;
+    the field term is a mean over points, as Cartographer's occupied_space_weight / sqrt(N))."""
+    rotation_weight: float = 40.0
+    """Least-squares pull towards the correlative heading (Cartographer ``rotation_weight`` 40)."""
+    loop_search_maximum_distance: float = 8.0
+    """Finished submaps whose nodes' centre is within this distance (m) of a node are searched."""
+    loop_search_space_dimension: float = 2.0
+    """Loop-closure window half-width (m) (slam_toolbox ``loop_search_space_dimension`` 8 = full)."""
+    loop_search_angular_window: float = math.radians(20.0)
+    """Loop-closure window half-width (rad) (Cartographer constraint builder 30 deg)."""
+    loop_search_angular_step: float = math.radians(0.5)
+    """Loop-closure angle step (rad)."""
+    loop_search_levels: int = 4
+    """Coarse-to-fine levels of the loop-closure search (max block 2^levels cells)."""
+    loop_match_minimum_response_fine: float = 0.6
+    """Minimum mean likelihood (0..1) to accept a loop closure (slam_toolbox 0.45)."""
+    loop_search_every_n_nodes: int = 3
+    """Only every n-th node is searched for loop closures (Cartographer ``sampling_ratio`` 0.3)."""
+    loop_max_candidates: int = 2
+    """Nearest finished submaps searched per node."""
+    optimize_every_n_nodes: int = 100
+    """Back end optimizes after this many new nodes even without a new loop (Cartographer 90)."""
+    constraint_translation_sigma: float = 0.02
+    """Std-dev (m) of a scan-to-submap constraint."""
+    constraint_rotation_sigma: float = 0.01
+    """Std-dev (rad) of a scan-to-submap constraint."""
+    odometry_translation_sigma: float = 0.05
+    """Std-dev (m) of the front-end chain between consecutive nodes."""
+    odometry_rotation_sigma: float = 0.02
+    """Std-dev (rad) of the front-end chain between consecutive nodes."""
+    huber_delta: float = 3.0
+    """Huber threshold (Mahalanobis units) of loop-closure edges."""
+    max_iterations: int = 15
+    """Pose-graph Gauss-Newton iterations."""
+
+    def grid_options(self) -> LogOddsOptions:
+        return LogOddsOptions(resolution=self.resolution, grow_margin=2.0)
+
+
+@dataclass
+class _Node:
+    stamp: float
+    local: Pose2D
+    points: np.ndarray  # matching points, base_link frame
+    submaps: list[int] = field(default_factory=list)
+
+
+def _voxel_filter(pts: np.ndarray, size: float, max_points: int) -> np.ndarray:
+    """One point per ``size`` cell (first in beam order, so deterministic), then a uniform stride."""
+    if pts.shape[0] == 0:
+        return pts
+    keys = np.floor(pts / size).astype(np.int64)
+    _, idx = np.unique(keys[:, 0] * 1_000_003 + keys[:, 1], return_index=True)
+    pts = pts[np.sort(idx)]
+    if pts.shape[0] > max_points:
+        pts = pts[np.linspace(0, pts.shape[0] - 1, max_points).astype(np.int64)]
+    return pts
+
+
+def _compose_arr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise SE(2) composition of (N, 3) arrays."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    th = (a[:, 2] + b[:, 2] + np.pi) % (2 * np.pi) - np.pi
+    return np.column_stack((a[:, 0] + c * b[:, 0] - s * b[:, 1], a[:, 1] + s * b[:, 0] + c * b[:, 1], th))
+
+
+class GraphSlam:
+    """Graph SLAM over submaps. Deterministic for a given input sequence."""
+
+    def __init__(self, options: SlamOptions | None = None) -> None:
+        self.options = options or SlamOptions()
+        o = self.options
+        self._lock = threading.Lock()
+        self._backend_lock = threading.Lock()
+        self._window = SearchWindow(o.linear_search_window, o.angular_search_window, o.angular_search_step, 0)
+        self._loop_window = SearchWindow(
+            o.loop_search_space_dimension,
+            o.loop_search_angular_window,
+            o.loop_search_angular_step,
+            o.loop_search_levels,
+            64,
+        )
+        self._refine = RefineOptions(
+            translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
+        )
+        self._nodes: list[_Node] = []
+        self._global: list[np.ndarray] = []  # map pose per node
+        self._submaps: list[Submap] = []
+        self._submap_global: list[np.ndarray] = []
+        self._loops: list[LoopCandidate] = []
+        # per scan (every add_scan call): stamp, reference node, pose relative to that node
+        self._scan_stamp: list[float] = []
+        self._scan_node: list[int] = []
+        self._scan_delta: list[np.ndarray] = []
+        self._last_odom: Pose2D | None = None
+        self._last_local = Pose2D()
+        self._last_node_odom: Pose2D | None = None
+        self._last_node_stamp = -math.inf
+        self._correction = Pose2D()  # map <- local
+        self._optimized_upto = 0  # nodes [0, n) have optimized map poses
+        self._searched_upto = 0
+        self._map: OccupancyGrid | None = None
+        self._map_nodes = -1
+        self.last_score = float("nan")
+
+    # -- front end ----------------------------------------------------------------------------------
+    def add_scan(self, scan: LaserScan, odom_pose: Pose2D, laser_pose: Pose2D = _IDENTITY) -> Pose2D:
+        """Process one scan with the odometry pose (odom -> base_link) at its stamp and the laser
+        pose in base_link. Returns the map-frame pose of base_link."""
+        o = self.options
+        with self._lock:
+            if self._last_odom is None:
+                pred = Pose2D()
+            else:
+                pred = self._last_local.compose(odom_pose.relative_to(self._last_odom))
+            self._last_odom = odom_pose
+            moved = self._last_node_odom is None or (
+                odom_pose.distance_to(self._last_node_odom) >= o.minimum_travel_distance
+                or abs(odom_pose.relative_to(self._last_node_odom).theta) >= o.minimum_travel_heading
+                or scan.stamp - self._last_node_stamp >= o.minimum_time_interval
+            )
+            local = pred
+            if moved:
+                local = self._add_node(scan, pred, laser_pose, odom_pose)
+            self._last_local = local
+            ref = len(self._nodes) - 1  # -1: no node yet (scans without returns so far)
+            delta = local.relative_to(self._nodes[ref].local) if ref >= 0 else local
+            self._scan_stamp.append(float(scan.stamp))
+            self._scan_node.append(ref)
+            self._scan_delta.append(delta.as_array())
+            return self._map_pose(ref).compose(delta)
+
+    def _split(self, scan: LaserScan, laser_pose: Pose2D) -> tuple[np.ndarray, np.ndarray]:
+        o = self.options
+        r = scan.ranges
+        a = scan.angles
+        hit = np.isfinite(r) & (r >= max(o.min_laser_range, scan.range_min)) & (r <= o.max_laser_range)
+        miss = ~hit & ~np.isnan(r) & ~(r < max(o.min_laser_range, scan.range_min))
+        rm = np.minimum(np.where(np.isfinite(r), r, np.inf), o.max_laser_range)
+        rm = np.where(r > o.max_laser_range, np.minimum(rm, o.missing_data_ray_length), rm)
+        rm = np.where(np.isinf(r), o.missing_data_ray_length, rm)
+        pts = np.column_stack((r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])))
+        misses = np.column_stack((rm[miss] * np.cos(a[miss]), rm[miss] * np.sin(a[miss])))
+        return pts, misses
+
+    def _add_node(self, scan: LaserScan, pred: Pose2D, laser_pose: Pose2D, odom_pose: Pose2D) -> Pose2D:
+        o = self.options
+        pts_laser, misses = self._split(scan, laser_pose)
+        if pts_laser.shape[0] < 3:  # nothing to match or insert: dead-reckon on odometry
+            return pred
+        match_pts = _voxel_filter(
+            laser_pose.transform_points(pts_laser), o.voxel_filter_size, o.max_match_points
+        )
+        local = pred
+        target = self._matching_submap()
+        if target is not None:
+            prior = pred.relative_to(target.local_pose)
+            try:
+                in_submap, self.last_score = match_scan(
+                    target.field(), match_pts, prior, self._window, self._refine
+                )
+                local = target.local_pose.compose(in_submap)
+            except ScanMatchError:
+                local = pred
+        index = len(self._nodes)
+        node = _Node(float(scan.stamp), local, match_pts)
+        self._nodes.append(node)
+        self._global.append(self._correction.compose(local).as_array())
+        self._last_node_odom = odom_pose
+        self._last_node_stamp = float(scan.stamp)
+        # submap bookkeeping: start a new one when the newest has submap_num_range_data nodes
+        if not self._submaps or len(self._submaps[-1].nodes) >= o.submap_num_range_data:
+            sm = Submap(len(self._submaps), local, o.grid_options(), o.likelihood_sigma)
+            self._submaps.append(sm)
+            self._submap_global.append(self._correction.compose(local).as_array())
+        for sm in self._submaps[-2:]:
+            if not sm.finished:
+                sm.insert(index, local, laser_pose, pts_laser, misses)
+                node.submaps.append(sm.index)
+                if len(sm.nodes) >= 2 * o.submap_num_range_data:
+                    sm.finished = True
+                    sm.release_field()
+        return local
+
+    def _matching_submap(self) -> Submap | None:
+        active = [s for s in self._submaps[-2:] if not s.finished and s.nodes]
+        return active[0] if active else None
+
+    def _map_pose(self, node: int) -> Pose2D:
+        """Map pose of a node; ``-1`` (before the first node) is the map origin."""
+        if node < 0:
+            return Pose2D()
+        if node < self._optimized_upto:
+            return Pose2D.from_array(self._global[node])
+        return self._correction.compose(self._nodes[node].local)
+
+    # -- back end -----------------------------------------------------------------------------------
+    def optimize_if_due(self) -> bool:
+        """Run the back end when enough new nodes arrived; True if it optimized."""
+        with self._lock:
+            due = len(self._nodes) - self._optimized_upto >= self.options.optimize_every_n_nodes
+        return self.run_backend() if due else False
+
+    def run_backend(self) -> bool:
+        """Loop-closure search for nodes added since the last call, then pose-graph optimization.
+        Safe to call from a worker thread while ``add_scan`` runs; returns True if it optimized."""
+        o = self.options
+        with self._backend_lock:
+            with self._lock:  # snapshot (brief)
+                n = len(self._nodes)
+                nodes = self._nodes[:n]
+                glob = np.array(self._global[:n]) if n else np.zeros((0, 3))
+                for k in range(self._optimized_upto, n):
+                    glob[k] = self._correction.compose(nodes[k].local).as_array()
+                m = len(self._submaps)
+                submaps = self._submaps[:m]
+                finished = [s.index for s in submaps if s.finished]
+                sm_nodes = [list(s.nodes) for s in submaps]
+                sm_glob = np.array(self._submap_global[:m]) if m else np.zeros((0, 3))
+                start = self._searched_upto
+            if n < 2:
+                return False
+            new_loops = self._search_loops(nodes, glob, submaps, finished, sm_nodes, sm_glob, start, n)
+            edges = self._edges(nodes, submaps, sm_nodes, n, m, self._loops + new_loops)
+            x0 = np.vstack((glob, sm_glob))
+            x, _w = optimize_pose_graph(
+                x0, edges, 0, PoseGraphOptions(max_iterations=o.max_iterations, huber_delta=o.huber_delta)
+            )
+            with self._lock:  # publish (brief)
+                self._loops.extend(new_loops)
+                self._searched_upto = n
+                self._global[:n] = list(x[:n])
+                self._submap_global[:m] = list(x[n:])
+                last = nodes[n - 1]
+                self._correction = Pose2D.from_array(x[n - 1]).compose(last.local.inverse())
+                for k in range(n, len(self._nodes)):
+                    self._global[k] = self._correction.compose(self._nodes[k].local).as_array()
+                for k in range(m, len(self._submaps)):
+                    self._submap_global[k] = self._correction.compose(self._submaps[k].local_pose).as_array()
+                self._optimized_upto = n
+            return True
+
+    def _search_loops(
+        self,
+        nodes: list[_Node],
+        glob: np.ndarray,
+        submaps: list[Submap],
+        finished: list[int],
+        sm_nodes: list[list[int]],
+        sm_glob: np.ndarray,
+        start: int,
+        n: int,
+    ) -> list[LoopCandidate]:
+        """Loop closures for nodes ``[start, n)`` against nearby finished submaps (snapshot data)."""
+        o = self.options
+        if not finished:
+            return []
+        fin = np.array(finished)
+        centres = np.array([glob[sm_nodes[j]][:, :2].mean(axis=0) for j in finished])
+        found: list[LoopCandidate] = []
+        for i in range(start, n):
+            if i % o.loop_search_every_n_nodes:
+                continue
+            d = np.hypot(*(centres - glob[i, :2]).T)
+            mine = set(nodes[i].submaps)
+            order = [
+                k
+                for k in np.argsort(d, kind="stable")
+                if d[k] <= o.loop_search_maximum_distance and fin[k] not in mine
+            ]
+            for k in order[: o.loop_max_candidates]:
+                j = int(fin[k])
+                guess = Pose2D.from_array(glob[i]).relative_to(Pose2D.from_array(sm_glob[j]))
+                cand = find_loop_closure(
+                    submaps[j],
+                    i,
+                    nodes[i].points,
+                    guess,
+                    self._loop_window,
+                    o.loop_match_minimum_response_fine,
+                    self._refine,
+                )
+                if cand is not None:
+                    found.append(cand)
+        return found
+
+    def _edges(
+        self,
+        nodes: list[_Node],
+        submaps: list[Submap],
+        sm_nodes: list[list[int]],
+        n: int,
+        m: int,
+        loops: list[LoopCandidate],
+    ) -> EdgeSet:
+        """Graph edges: node-in-submap (front end), consecutive nodes, and robust loop closures.
+        Variables are the n nodes followed by the m submaps."""
+        o = self.options
+        ii, jj, zz, ww, rb = [], [], [], [], []
+        c_info = [1 / o.constraint_translation_sigma] * 2 + [1 / o.constraint_rotation_sigma]
+        o_info = [1 / o.odometry_translation_sigma] * 2 + [1 / o.odometry_rotation_sigma]
+        for j in range(m):
+            sm = submaps[j]
+            for i in sm_nodes[j]:
+                if i >= n:
+                    continue
+                ii.append(n + j)
+                jj.append(i)
+                zz.append(nodes[i].local.relative_to(sm.local_pose).as_array())
+                ww.append(c_info)
+                rb.append(False)
+        for i in range(1, n):
+            ii.append(i - 1)
+            jj.append(i)
+            zz.append(nodes[i].local.relative_to(nodes[i - 1].local).as_array())
+            ww.append(o_info)
+            rb.append(False)
+        for lc in loops:
+            ii.append(n + lc.submap)
+            jj.append(lc.node)
+            zz.append(lc.relative.as_array())
+            ww.append(c_info)
+            rb.append(True)
+        return EdgeSet(np.array(ii), np.array(jj), np.array(zz), np.array(ww), np.array(rb))
+
+    # -- outputs ------------------------------------------------------------------------------------
+    def map(self) -> OccupancyGrid:
+        """The global occupancy grid, re-rendered from the submaps at their latest map poses."""
+        with self._lock:
+            n = len(self._nodes)
+            if self._map is not None and self._map_nodes == n:
+                return self._map
+            grids = []
+            for j, sm in enumerate(self._submaps):
+                g = sm.grid
+                pose = Pose2D.from_array(self._submap_global[j])
+                grids.append((pose, g.origin.copy(), g.logodds.copy(), g.seen.copy()))
+        grid = render_submaps(grids, self.options.grid_options())
+        out = grid.to_occupancy_grid()
+        with self._lock:
+            self._map, self._map_nodes = out, n
+        return out
+
+    def trajectory(self) -> np.ndarray:
+        """(N, 4) ``t, x, y, theta`` of base_link in the map frame, one row per ``add_scan`` call."""
+        with self._lock:
+            if not self._scan_stamp:
+                return np.zeros((0, 4))
+            ref = np.array(self._scan_node)
+            base = np.array([self._map_pose(k).as_array() for k in range(-1, len(self._nodes))])
+            poses = _compose_arr(base[ref + 1], np.array(self._scan_delta))
+            return np.column_stack((np.array(self._scan_stamp), poses))
+
+    def node_poses(self) -> np.ndarray:
+        """(n, 3) map poses of the graph's scan nodes."""
+        with self._lock:
+            return np.array([self._map_pose(k).as_array() for k in range(len(self._nodes))]).reshape(-1, 3)
+
+    def loop_closure_edges(self) -> np.ndarray:
+        """(E, 2, 2) segments from each loop-closed submap's origin to its node (map frame), for display."""
+        with self._lock:
+            segs = [
+                (self._submap_global[lc.submap][:2], self._map_pose(lc.node).as_array()[:2])
+                for lc in self._loops
+            ]
+        return np.array(segs, dtype=float).reshape(-1, 2, 2)
+
+    def map_to_odom(self) -> Pose2D:
+        """map -> odom transform: map pose of base_link composed with the inverse odometry pose."""
+        with self._lock:
+            if not self._scan_stamp or self._last_odom is None:
+                return Pose2D()
+            ref = self._scan_node[-1]
+            base = self._map_pose(ref).compose(Pose2D.from_array(self._scan_delta[-1]))
+            return base.compose(self._last_odom.inverse())
+
+    @property
+    def num_nodes(self) -> int:
+        return len(self._nodes)
+
+    @property
+    def num_loop_closures(self) -> int:
+        return len(self._loops)
