@@ -112,6 +112,15 @@ class SnapshotBus:
             sub._put(self.latest)
         return sub
 
+    def attach(self, sub: Subscription) -> Subscription:
+        """Add a custom subscription (a Subscription subclass, e.g. a small ring buffer for a recorder
+        that must see every snapshot); it gets the latest snapshot at once, like ``subscribe``."""
+        with self._lock:
+            self._subs = [*self._subs, sub]
+        if self.latest is not None:
+            sub._put(self.latest)
+        return sub
+
     def unsubscribe(self, sub: Subscription) -> None:
         with self._lock:
             self._subs = [s for s in self._subs if s is not sub]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import JSON, Column, LargeBinary
+from sqlalchemy import JSON, Column, Index, LargeBinary
 from sqlmodel import Field, SQLModel
 
 
@@ -61,12 +61,124 @@ class Run(SQLModel, table=True):
     ended_at: datetime | None = None
     outcome: str = Field(default="recording", index=True, max_length=50)
     summary: dict[str, Any] = Field(default_factory=dict, sa_column=Column(JSON, nullable=False))
+    # Added by migration 0002 (the recorder keeps them current at every flush):
+    robot_name: str = Field(default="", max_length=100)
+    duration_s: float = 0.0  # last recorded sample time: a crash still leaves a true duration
+    distance_m: float = 0.0
+    end_reason: str = Field(default="", max_length=200)
 
 
 class RunEvent(SQLModel, table=True):
     __tablename__ = "run_events"
+    __table_args__ = (Index("ix_run_events_run_id_t", "run_id", "t"),)  # migration 0002
     id: int | None = Field(default=None, primary_key=True)
     run_id: int = Field(foreign_key="runs.id", index=True)
     t: float  # seconds since the run started
     type: str = Field(max_length=50)
     payload: dict[str, Any] = Field(default_factory=dict, sa_column=Column(JSON, nullable=False))
+
+
+# ---------------------------------------------------------------------------------------------- runs
+# Per-run bulk data (migration 0002). Samples and scans are stored as compressed binary chunks of about
+# one recorder flush (<= 1 s) each, so a one-hour run is a few thousand rows, a seek reads one chunk,
+# and a crash loses at most the chunk being built. Codecs: app/runs/codec.py.
+
+
+class RunSampleChunk(SQLModel, table=True):
+    """Trajectory samples (>= 10 Hz) t0..t1 (s since run start): zlib of a packed numpy record array."""
+
+    __tablename__ = "run_sample_chunks"
+    __table_args__ = (Index("ix_run_sample_chunks_run_id_t0", "run_id", "t0"),)
+    id: int | None = Field(default=None, primary_key=True)
+    run_id: int = Field(foreign_key="runs.id", index=True)
+    t0: float
+    t1: float
+    n: int
+    labels: list[str] = Field(default_factory=list, sa_column=Column(JSON, nullable=False))  # behaviours
+    data: bytes = Field(sa_column=Column(LargeBinary, nullable=False))
+
+
+class RunScanChunk(SQLModel, table=True):
+    """Laser scans (downsampled, >= 2 Hz) t0..t1: per-scan headers plus ranges in uint16 millimetres."""
+
+    __tablename__ = "run_scan_chunks"
+    __table_args__ = (Index("ix_run_scan_chunks_run_id_t0", "run_id", "t0"),)
+    id: int | None = Field(default=None, primary_key=True)
+    run_id: int = Field(foreign_key="runs.id", index=True)
+    t0: float
+    t1: float
+    n: int
+    data: bytes = Field(sa_column=Column(LargeBinary, nullable=False))
+
+
+class RunPlan(SQLModel, table=True):
+    """A global plan (nav_msgs/Path, map frame) as it was from ``t`` until the next one."""
+
+    __tablename__ = "run_plans"
+    __table_args__ = (Index("ix_run_plans_run_id_t", "run_id", "t"),)
+    id: int | None = Field(default=None, primary_key=True)
+    run_id: int = Field(foreign_key="runs.id", index=True)
+    t: float
+    n: int
+    length_m: float = 0.0
+    data: bytes = Field(sa_column=Column(LargeBinary, nullable=False))  # float32 (n, 3) x, y, theta
+
+
+class RunGoal(SQLModel, table=True):
+    """A navigation goal and what became of it (pending | succeeded | failed | canceled)."""
+
+    __tablename__ = "run_goals"
+    __table_args__ = (Index("ix_run_goals_run_id_t", "run_id", "t"),)
+    id: int | None = Field(default=None, primary_key=True)
+    run_id: int = Field(foreign_key="runs.id", index=True)
+    t: float
+    t_end: float | None = None
+    x: float
+    y: float
+    theta: float
+    outcome: str = Field(default="pending", max_length=50)
+    reason: str = ""
+
+
+class RunGrid(SQLModel, table=True):
+    """The map as the run saw it from ``t`` (mapping runs store its growth, rate-limited)."""
+
+    __tablename__ = "run_grids"
+    __table_args__ = (Index("ix_run_grids_run_id_t", "run_id", "t"),)
+    id: int | None = Field(default=None, primary_key=True)
+    run_id: int = Field(foreign_key="runs.id", index=True)
+    t: float
+    version: int = 0
+    resolution: float
+    origin_x: float = 0.0
+    origin_y: float = 0.0
+    origin_yaw: float = 0.0
+    width: int
+    height: int
+    data: bytes = Field(sa_column=Column(LargeBinary, nullable=False))  # zlib int8 row-major
+
+
+# ---------------------------------------------------------------------------------------------- users
+# Sign-in (migration 0003, app/auth.py). Passwords and session tokens are stored only as hashes.
+
+
+class User(SQLModel, table=True):
+    """A person who may sign in: ``operator`` drives and edits, ``viewer`` only watches (and e-stops)."""
+
+    __tablename__ = "users"
+    id: int | None = Field(default=None, primary_key=True)
+    username: str = Field(index=True, unique=True, max_length=64)
+    password_hash: str = Field(max_length=400)  # "scrypt$n$r$p$salt_hex$hash_hex"
+    role: str = Field(default="viewer", max_length=20)
+    created_at: datetime = Field(default_factory=utcnow)
+
+
+class UserSession(SQLModel, table=True):
+    """A signed-in browser: the cookie carries a random token, the table only its SHA-256."""
+
+    __tablename__ = "user_sessions"
+    id: int | None = Field(default=None, primary_key=True)
+    token_hash: str = Field(index=True, unique=True, max_length=64)
+    user_id: int = Field(foreign_key="users.id", index=True)
+    created_at: datetime = Field(default_factory=utcnow)
+    expires_at: datetime = Field(index=True)

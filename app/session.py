@@ -146,13 +146,17 @@ class Session:
         self.safety_stop: str | None = None
         self.workers = ThreadPoolExecutor(max_workers=2, thread_name_prefix="worker")
         self._reset_driver = False
+        self._wake = threading.Event()
+        self._last_send_t = self.clock.now()
         self.started_at = self.clock.now()
 
     # ------------------------------------------------------------------ commands from other threads
     def set_teleop(self, cmd: Twist2D, client: str) -> None:
-        """Store an operator's velocity command (teleop websocket). Applied while the mode allows it."""
+        """Store an operator's velocity command (teleop websocket). Applied while the mode allows it;
+        wakes the control loop so the command reaches the driver without waiting for the next tick."""
         with self._lock:
             self._teleop = TeleopState(cmd, self.clock.now(), client)
+        self._wake.set()
 
     def stop_teleop(self, client: str | None = None) -> None:
         with self._lock:
@@ -198,6 +202,7 @@ class Session:
 
     def close(self) -> None:
         self._stop.set()
+        self._wake.set()
         if self._thread is not None:
             self._thread.join(timeout=2.0)
             self._thread = None
@@ -230,7 +235,28 @@ class Session:
             if now > next_t + self.period:  # overran by a whole period: skip, don't try to catch up
                 self.stats.overruns += 1
                 next_t = now
+            self._sleep_until(next_t)
+
+    def _sleep_until(self, next_t: float) -> None:
+        """Wait for the next tick; a fresh operator command wakes the loop to send it at once
+        (reflex path: command stage only, on the loop thread), so teleop latency is not a whole period."""
+        if self.clock.is_virtual:
             self.clock.sleep_until(next_t, self._stop)
+            return
+        while not self._stop.is_set():
+            remaining = next_t - self.clock.now()
+            if remaining <= 0:
+                return
+            if self._wake.wait(remaining):
+                self._wake.clear()
+                if self._stop.is_set():
+                    return
+                try:
+                    self._send(self._choose_command(self.clock.now()))
+                except Exception as exc:
+                    log.exception("reflex command failed")
+                    self._enter_fault(f"internal error: {exc}")
+                    self._safe_stop()
 
     def run_for(self, seconds: float) -> None:
         """Step the loop synchronously for ``seconds`` of clock time (virtual-clock tests and benches)."""
@@ -301,8 +327,11 @@ class Session:
         if cmd is None:
             self._safe_stop()
             return
+        now = self.clock.now()
+        dt = self.period if self.clock.is_virtual else min(max(now - self._last_send_t, 1e-3), self.period)
+        self._last_send_t = now
         limited, clamped = clamp_speed(cmd, self.profile.limits, self.profile.is_omni)
-        limited = limit_acceleration(limited, self.last_command, self.profile.limits, self.period)
+        limited = limit_acceleration(limited, self.last_command, self.profile.limits, dt)
         if self.safety is not None and self._last_frame is not None:
             # after the ramp: a safety stop is immediate, never smoothed away
             limited, self.safety_stop = self.safety(limited, self._last_frame)
@@ -401,7 +430,8 @@ class Session:
         return None
 
     def _fault_still_present(self) -> str | None:
-        return self._fault_condition(self.clock.now())
+        driver_fault = self._last_frame.fault if self._last_frame is not None else None
+        return self._fault_condition(self.clock.now()) or driver_fault
 
     def _on_mode_change(self, old: Mode, new: Mode, reason: str) -> None:
         self.add_event("mode", **{"from": old.value, "to": new.value, "reason": reason})

@@ -17,6 +17,7 @@ import contextlib
 import logging
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 from urllib.parse import parse_qs, urlparse
 
@@ -34,6 +35,8 @@ from robot.serial.protocol import (
     EStop,
     Heartbeat,
     MessageDecoder,
+    ParamSet,
+    ParamStatus,
     ParamValue,
     Reset,
     ResetMode,
@@ -195,6 +198,8 @@ class BaseLink:
         self._lost_reason = ""
         self._last_mcu_us: int | None = None
         self.refused_commands = 0
+        # (monotonic time written, message) of recent frames sent: diagnostics and the latency bench
+        self.sent_log: deque[tuple[float, object]] = deque(maxlen=1024)
         self._rx_bytes = 0  # bytes received since the last good telemetry (diagnoses wiring / baud)
         t = time.monotonic()
         self._rate_ref = ((t, 0, 0), (t, 0, 0))  # (time, good, bad) one and two buckets ago
@@ -216,8 +221,19 @@ class BaseLink:
             if data:
                 self._rx_bytes += len(data)
                 self._handle(self._decoder.feed(data))
-            self.link_status()  # the watchdog runs here too, so LOST does not wait for read()
+            if not self._backlog():  # judge silence only once everything that arrived is decoded
+                self.link_status()  # the watchdog runs here too, so LOST does not wait for read()
             self._keepalive()
+
+    def _backlog(self) -> int:
+        """Bytes received by the OS and not yet read (0 if the port is gone)."""
+        ser = self._ser
+        if ser is None:
+            return 0
+        try:
+            return int(ser.in_waiting)
+        except (serial.SerialException, OSError, TypeError, AttributeError):
+            return 0
 
     def _port_gone(self, reason: str) -> None:
         with self._lock:
@@ -298,7 +314,9 @@ class BaseLink:
         frame = self._seq.encode(msg)
         try:
             with self._write_lock:
+                t_write = time.monotonic()
                 ser.write(frame)
+            self.sent_log.append((t_write, msg))
             return True
         except (serial.SerialException, OSError, TypeError, AttributeError):
             return False  # the reader thread notices the dead port and reconnects
@@ -315,6 +333,17 @@ class BaseLink:
             if now - self._rate_ref[0][0] >= 1.0:  # two one-second buckets: the ratio covers 1-2 s
                 self._rate_ref = (self._rate_ref[1], (now, good, bad))
             _, good0, bad0 = self._rate_ref[0]
+        late = port_error is None and self.options.link_timeout < silent < 5 * self.options.link_timeout
+        if late and (waiting := self._backlog()):
+            # Telemetry did arrive (the OS holds it) but this process has not decoded it yet: the
+            # host was busy (GIL, swap, a start-up import), not the link. Within 5 timeouts this is
+            # DEGRADED, not LOST, so a busy host does not fault a healthy robot.
+            return LinkStatus(
+                LinkState.DEGRADED,
+                f"telemetry read {silent * 1000:.0f} ms late ({waiting} bytes waiting: host busy)",
+                good,
+                bad,
+            )
         if port_error is not None or silent > self.options.link_timeout:
             reason = port_error or f"no telemetry from {self.options.port} for {silent * 1000:.0f} ms"
             if port_error is None and self._rx_bytes > 64:
@@ -485,10 +514,35 @@ class SerialDriver:
     def reset(self) -> None:
         self._base.send(Reset(ResetMode.CLEAR_ESTOP))
 
+    def set_param(self, param_id: int, value: float, timeout: float = 1.0) -> ParamValue:
+        """Write a firmware parameter (PARAM_SET) and wait for the base's PARAM_VALUE answer.
+
+        Raises ``SerialLinkError`` when no answer comes within ``timeout`` s or the base refuses."""
+        base = self._base
+        with base._lock:
+            base.params.pop(int(param_id), None)
+        if not base.send(ParamSet(int(param_id), float(value))):
+            raise SerialLinkError(f"cannot send parameter {param_id}: base port {self.options.port} is gone")
+        end = time.monotonic() + timeout
+        while (reply := base.params.get(int(param_id))) is None:
+            if time.monotonic() > end:
+                raise SerialLinkError(f"the base did not answer PARAM_SET {param_id} within {timeout:.1f} s")
+            time.sleep(0.005)
+        if reply.status != ParamStatus.OK:
+            raise SerialLinkError(
+                f"the base refused parameter {param_id} = {value:g}: {ParamStatus(reply.status).name}"
+            )
+        return reply
+
     @property
     def refused_commands(self) -> int:
         """Commands dropped because the link was LOST."""
         return self._base.refused_commands
+
+    @property
+    def sent_log(self) -> deque[tuple[float, object]]:
+        """Recent frames written to the base port with their monotonic write times."""
+        return self._base.sent_log
 
     @property
     def telemetry(self) -> Telemetry | None:

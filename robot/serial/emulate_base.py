@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
+from collections import deque
 from dataclasses import dataclass
 
 import numpy as np
@@ -66,8 +67,10 @@ class _Sensors:
     """Sensor state accumulated from the simulator between two telemetry frames."""
 
     counts: np.ndarray
-    gyro_sum: float = 0.0
-    gyro_n: int = 0
+    gyro_integral: float = 0.0  # rad turned since the last telemetry frame
+    gyro_time: float = 0.0  # s of IMU samples in that integral
+    gyro_last: float = 0.0  # rate of the newest sample, repeated when no new sample came
+    imu_stamp: float | None = None
     accel: tuple[float, float, float] = (0.0, 0.0, 9.81)
     ir_bits: int = 0
     battery_v: float = 12.0
@@ -101,6 +104,9 @@ class BaseEmulator:
         self._lock = threading.Lock()
         self._sensors = _Sensors(np.zeros(4, dtype=np.int64))
         self._enc_offset = np.zeros(4, dtype=np.int64)
+        self._slip_speed = np.zeros(4)  # m/s of rim speed the ground does not take (fault switch)
+        self._slip_angle = np.zeros(4)  # rad of wheel rotation added by slip so far
+        self._last_stamp: float | None = None
         self._decoder = MessageDecoder()
         self._seq = Sequencer()
         self._t0 = time.monotonic()
@@ -109,6 +115,9 @@ class BaseEmulator:
         self.estopped = False
         self.watchdog_fired = False
         self.last_command: VelocityCommand | None = None
+        # (monotonic time the bytes were read, message) of every host frame: tests and the latency
+        # benchmark see exactly what reached the "firmware" and when
+        self.message_log: deque[tuple[float, Message]] = deque(maxlen=8192)
         self.heartbeats = 0
         self.telemetry_sent = 0
         self._stop = threading.Event()
@@ -125,10 +134,21 @@ class BaseEmulator:
             s = self._sensors
             if frame.ticks is not None:
                 n = frame.ticks.counts.size
-                s.counts[:n] = frame.ticks.counts
+                if self._last_stamp is not None and np.any(self._slip_speed):
+                    dt = max(0.0, frame.ticks.stamp - self._last_stamp)
+                    self._slip_angle += self._slip_speed * (dt / self.profile.wheel_radius)
+                self._last_stamp = frame.ticks.stamp
+                slip = np.floor(self._slip_angle / (2 * np.pi) * self.profile.ticks_per_rev).astype(np.int64)
+                s.counts[:n] = frame.ticks.counts + slip[:n]
             if frame.imu is not None:
-                s.gyro_sum += frame.imu.gyro_z
-                s.gyro_n += 1
+                # the simulator's gyro is the mean rate since its previous IMU reading: weight by
+                # that interval so the telemetry carries the true mean rate of its own period
+                if s.imu_stamp is not None and frame.imu.stamp > s.imu_stamp:
+                    dt = frame.imu.stamp - s.imu_stamp
+                    s.gyro_integral += frame.imu.gyro_z * dt
+                    s.gyro_time += dt
+                s.imu_stamp = frame.imu.stamp
+                s.gyro_last = frame.imu.gyro_z
                 s.accel = frame.imu.accel
             if frame.ir is not None:
                 bits = frame.ir.triggered.astype(np.int64)
@@ -150,7 +170,9 @@ class BaseEmulator:
             now = time.monotonic()
             data = self.port.read(timeout=min(max(next_telemetry - now, 0.0), 0.005))
             if data:
+                t_read = time.monotonic()
                 for msg in self._decoder.feed(data):
+                    self.message_log.append((t_read, msg))
                     self._handle(msg)
             now = time.monotonic()
             self._watchdog(now)
@@ -239,8 +261,9 @@ class BaseEmulator:
         with self._lock:
             s = self._sensors
             raw = s.counts - self._enc_offset
-            gyro = s.gyro_sum / s.gyro_n if s.gyro_n else 0.0
-            s.gyro_sum, s.gyro_n = 0.0, 0
+            # a period without a new IMU sample repeats the last rate (an MCU holds its last reading)
+            gyro = s.gyro_integral / s.gyro_time if s.gyro_time > 0 else s.gyro_last
+            s.gyro_integral, s.gyro_time = 0.0, 0.0
             accel, ir_bits, battery, obstacle = s.accel, s.ir_bits, s.battery_v, s.obstacle_stop
         enc = (((raw + (1 << 31)) % (1 << 32)) - (1 << 31)).astype(np.int64).tolist()
         status = Status(0)
@@ -260,6 +283,17 @@ class BaseEmulator:
         self.telemetry_sent += 1
 
     # ---- fault switches --------------------------------------------------------------------------
+    def set_wheel_slip(self, rim_speed: np.ndarray | list[float] | None) -> None:
+        """Wheels spinning on a slippery patch: each wheel (profile order) turns ``rim_speed`` m/s
+        faster than the ground carries it, so the encoders count motion that neither the body nor
+        the gyro makes (what ``WheelOdometry``'s slip detector looks for). None clears it."""
+        speed = np.zeros(4)
+        if rim_speed is not None:
+            given = np.asarray(rim_speed, dtype=float)
+            speed[: given.size] = given
+        with self._lock:
+            self._slip_speed = speed
+
     def unplug(self) -> None:
         """Pull the cable: the pty disappears (the motors stop, as USB power would go)."""
         self.port.unplug()

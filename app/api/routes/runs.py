@@ -1,0 +1,319 @@
+"""Recorded runs: list, detail, trajectory, map image, exports, delete, and replay control."""
+
+from __future__ import annotations
+
+from datetime import date, datetime, time, timedelta
+from typing import Annotated, Literal
+
+from fastapi import APIRouter, Depends, HTTPException, Query, WebSocket
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, Response
+
+from app.api.deps import RuntimeDep, StrictModel, get_runtime
+from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, RunStillRecording, utc_aware
+
+router = APIRouter(tags=["runs"])
+
+Kind = Literal["teleop", "mapping", "navigation"]
+Outcome = Literal["recording", "completed", "succeeded", "failed", "aborted", "stopped", "interrupted"]
+assert set(Kind.__args__) == set(KINDS) and set(Outcome.__args__) == set(OUTCOMES)  # type: ignore[attr-defined]
+
+NOT_FOUND = {404: {"description": "no such run"}}
+RECORDING = {409: {"description": "the run is still recording"}}
+
+
+def _recording(rt: RuntimeDep):
+    rec = rt.features.get("recording")
+    if rec is None:
+        raise HTTPException(503, "run recording is not enabled on this server")
+    return rec
+
+
+def get_store(rt: Annotated[object, Depends(get_runtime)]) -> RunsStore:
+    rec = getattr(rt, "features", {}).get("recording")
+    return rec.store if rec is not None else RunsStore(rt.engine)  # type: ignore[attr-defined]
+
+
+StoreDep = Annotated[RunsStore, Depends(get_store)]
+
+
+def _bad(field: str, msg: str) -> RequestValidationError:
+    return RequestValidationError([{"loc": ("query", field), "msg": msg, "type": "value_error"}])
+
+
+def parse_when(value: str | None, field: str, *, end: bool = False) -> datetime | None:
+    """ISO date or datetime (UTC if no zone). A plain date as ``until`` includes that whole day."""
+    if value is None or value == "":
+        return None
+    try:
+        if len(value) == 10:
+            d = date.fromisoformat(value)
+            return utc_aware(datetime.combine(d + timedelta(days=1 if end else 0), time()))
+        return utc_aware(datetime.fromisoformat(value.replace("Z", "+00:00")))
+    except ValueError:
+        raise _bad(field, f"not an ISO date or datetime: {value!r}") from None
+
+
+def _found(fn, *args):
+    try:
+        return fn(*args)
+    except RunNotFound:
+        raise HTTPException(404, f"no run with id {args[0]}") from None
+
+
+@router.get("/api/runs", summary="Recorded runs, newest first, with filters and pagination")
+def list_runs(
+    store: StoreDep,
+    kind: Kind | None = None,
+    outcome: Outcome | None = None,
+    map_id: Annotated[int | None, Query(ge=1)] = None,
+    robot: Annotated[str | None, Query(max_length=100)] = None,
+    since: Annotated[str | None, Query(description="ISO date/datetime, UTC if no zone")] = None,
+    until: Annotated[str | None, Query(description="ISO date (inclusive) or datetime (exclusive)")] = None,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> dict:
+    t0, t1 = parse_when(since, "since"), parse_when(until, "until", end=True)
+    if t0 is not None and t1 is not None and t1 <= t0:
+        raise _bad("until", "must be after since")
+    total, items = store.list(RunFilters(kind, outcome, map_id, robot, t0, t1), limit, offset)
+    return {"total": total, "limit": limit, "offset": offset, "items": items}
+
+
+@router.get("/api/runs/{run_id}", summary="One run: summary metrics, events, goals", responses=NOT_FOUND)
+def get_run(run_id: int, store: StoreDep) -> dict:
+    return _found(store.detail, run_id)
+
+
+@router.get(
+    "/api/runs/{run_id}/trajectory",
+    summary="Trajectory samples as columns (decimated to max_points), with the run's map geometry",
+    responses=NOT_FOUND,
+)
+def trajectory(
+    run_id: int,
+    store: StoreDep,
+    t0: float | None = None,
+    t1: float | None = None,
+    max_points: Annotated[int, Query(ge=2, le=100_000)] = 5000,
+) -> dict:
+    from app.export.tabular import samples_columns
+
+    _found(store.run, run_id)
+    samples, labels = store.samples(run_id, t0, t1)
+    step = max(1, -(-samples.shape[0] // max_points))
+    out = {"run_id": run_id, "count": int(samples.shape[0]), "step": step}
+    out["samples"] = samples_columns(samples[::step], labels)
+    grid = store.grid_at(run_id)
+    if grid is not None:
+        g = grid[2].geometry
+        out["map"] = {
+            "resolution": g.resolution,
+            "width": g.width,
+            "height": g.height,
+            "origin": [g.origin.x, g.origin.y, g.origin.theta],
+            "image_url": f"/api/runs/{run_id}/map.png",
+        }
+    return out
+
+
+@router.get(
+    "/api/runs/{run_id}/map.png",
+    summary="The map as the run last saw it, full size (map_saver grey levels, top row first)",
+    responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
+)
+def run_map_png(run_id: int, store: StoreDep) -> Response:
+    from maps.png import encode_png
+    from maps.render import grid_to_grey
+
+    _found(store.run, run_id)
+    hit = store.grid_at(run_id)
+    if hit is None:
+        raise HTTPException(404, f"run {run_id} has no map")
+    return Response(encode_png(grid_to_grey(hit[2])), media_type="image/png")
+
+
+@router.get(
+    "/api/runs/{run_id}/state",
+    summary="Replay seek: the run as it was at time t (pose, speeds, scan points, plan, goal)",
+    responses=NOT_FOUND,
+)
+def state_at(run_id: int, store: StoreDep, t: Annotated[float, Query(ge=0)] = 0.0) -> dict:
+    from app.runs.codec import MODES
+
+    _found(store.run, run_id)
+    row, labels = store.sample_at(run_id, t)
+    if row is None:
+        raise HTTPException(404, f"run {run_id} has no samples")
+    out: dict = {
+        "t": float(row["t"]),
+        "pose": [float(row["x"]), float(row["y"]), float(row["theta"])],
+        "velocity": [float(row["vx"]), float(row["vy"]), float(row["wz"])],
+        "command": [float(row["cmd_vx"]), float(row["cmd_vy"]), float(row["cmd_wz"])],
+        "mode": MODES[int(row["mode"])],
+        "behavior": labels[int(row["behavior"])] or None if int(row["behavior"]) < len(labels) else None,
+    }
+    scan = store.scan_at(run_id, t)
+    if scan is not None:
+        from nav.types import Pose2D
+
+        pose = Pose2D(*out["pose"])
+        summary = store.run(run_id)["summary"]
+        laser = Pose2D(*(summary.get("laser_pose") or [0.0, 0.0, 0.0])[:3])
+        pts = pose.compose(laser).transform_points(scan[1].points())
+        out["scan"] = {"t": scan[0], "points": [[round(x, 3), round(y, 3)] for x, y in pts.tolist()]}
+    plan = store.plan_at(run_id, t)
+    if plan is not None:
+        out["plan"] = {"t": plan[0], "poses": [[round(v, 3) for v in p] for p in plan[1][:, :2].tolist()]}
+    return out
+
+
+@router.get(
+    "/api/runs/{run_id}/export.mcap",
+    summary="Download as MCAP with ROS 2 messages (Foxglove, ros2 bag)",
+    responses={**NOT_FOUND, **RECORDING, 200: {"content": {"application/octet-stream": {}}}},
+)
+def export_mcap(run_id: int, store: StoreDep) -> Response:
+    from app.export.mcap import mcap_bytes
+
+    data = _load(store, run_id)
+    return Response(
+        mcap_bytes(data),
+        media_type="application/octet-stream",
+        headers={"Content-Disposition": f'attachment; filename="navdeck-run-{run_id}.mcap"'},
+    )
+
+
+@router.get(
+    "/api/runs/{run_id}/export.json",
+    summary="Download everything as JSON (samples as columns; scans with ?scans=true)",
+    responses={**NOT_FOUND, **RECORDING},
+)
+def export_json(run_id: int, store: StoreDep, scans: bool = False) -> JSONResponse:
+    from app.export.tabular import run_json
+
+    data = _load(store, run_id)
+    return JSONResponse(
+        run_json(data, with_scans=scans),
+        headers={"Content-Disposition": f'attachment; filename="navdeck-run-{run_id}.json"'},
+    )
+
+
+@router.get(
+    "/api/runs/{run_id}/export.csv",
+    summary="Download the trajectory samples as CSV",
+    responses={**NOT_FOUND, **RECORDING, 200: {"content": {"text/csv": {}}}},
+)
+def export_csv(run_id: int, store: StoreDep) -> Response:
+    from app.export.tabular import samples_csv
+
+    data = _load(store, run_id)
+    return Response(
+        samples_csv(data),
+        media_type="text/csv",
+        headers={"Content-Disposition": f'attachment; filename="navdeck-run-{run_id}.csv"'},
+    )
+
+
+@router.delete("/api/runs/{run_id}", status_code=204, responses={**NOT_FOUND, **RECORDING})
+def delete_run(run_id: int, store: StoreDep) -> Response:
+    run = _found(store.run, run_id)
+    if run["outcome"] == "recording":
+        raise HTTPException(409, f"run {run_id} is still recording")
+    store.delete(run_id)
+    return Response(status_code=204)
+
+
+def _load(store: RunsStore, run_id: int):
+    from app.export.data import load_run
+
+    try:
+        return load_run(store, run_id)
+    except RunNotFound:
+        raise HTTPException(404, f"no run with id {run_id}") from None
+    except RunStillRecording:
+        raise HTTPException(409, f"run {run_id} is still recording; export it when it has ended") from None
+
+
+# ---------------------------------------------------------------------------------------------- replay
+class ReplayCommand(StrictModel):
+    """Replay control: load a run, then play / pause / seek (t, s) / speed (factor)."""
+
+    action: Literal["load", "play", "pause", "seek", "speed"]
+    run_id: int | None = None
+    t: float | None = None
+    speed: float | None = None
+
+
+@router.get("/api/replay", summary="Replay player state")
+def replay_state(rt: RuntimeDep) -> dict:
+    return _recording(rt).replay.state()
+
+
+@router.post("/api/replay", summary="Control the replay in the 3D view (served at /replay/viz/)")
+def replay_control(cmd: ReplayCommand, rt: RuntimeDep) -> dict:
+    from app.runs.replay import ReplayError
+
+    player = _recording(rt).replay
+    try:
+        if cmd.action == "load":
+            if cmd.run_id is None:
+                raise _body_error("run_id", "required to load a run")
+            state = _found(player.load, cmd.run_id)
+            return player.seek(cmd.t) if cmd.t is not None else state
+        if cmd.action == "play":
+            return player.play()
+        if cmd.action == "pause":
+            return player.pause()
+        if cmd.action == "seek":
+            if cmd.t is None:
+                raise _body_error("t", "required to seek")
+            return player.seek(cmd.t)
+        if cmd.speed is None:
+            raise _body_error("speed", "required to set the speed")
+        try:
+            return player.set_speed(cmd.speed)
+        except ValueError as exc:
+            raise _body_error("speed", str(exc)) from None
+    except ReplayError as exc:
+        raise HTTPException(409, str(exc)) from None
+
+
+def _body_error(field: str, msg: str) -> RequestValidationError:
+    return RequestValidationError([{"loc": ("body", field), "msg": msg, "type": "value_error"}])
+
+
+@router.get("/replay/viz/", include_in_schema=False)
+async def replay_viz_index() -> FileResponse:
+    from app.viewer.relay import CLIENT_HTML
+
+    return FileResponse(CLIENT_HTML, media_type="text/html")
+
+
+@router.websocket("/replay/viz")
+async def replay_viz_ws(ws: WebSocket) -> None:
+    """The replay viewer's viser websocket, relayed like the live one (app/viewer/relay.py)."""
+    import websockets
+
+    from app.viewer.relay import CLOSE_TRY_AGAIN, relay
+
+    rec = ws.app.state.runtime.features.get("recording")
+    player = None if rec is None else rec.replay_if_started
+    viewer = None if player is None else player.viewer
+    if viewer is None or not viewer.running:
+        await ws.close(code=CLOSE_TRY_AGAIN)
+        return
+    protos = list(ws.scope.get("subprotocols", []))
+    try:
+        upstream = await websockets.connect(
+            f"ws://127.0.0.1:{viewer.port}",
+            subprotocols=protos or None,  # type: ignore[arg-type]
+            max_size=None,
+            compression=None,
+            open_timeout=5.0,
+        )
+    except (OSError, websockets.InvalidHandshake, TimeoutError):
+        await ws.close(code=CLOSE_TRY_AGAIN)
+        return
+    await ws.accept(subprotocol=upstream.subprotocol)
+    await relay(ws, upstream)

@@ -1,0 +1,250 @@
+"""Full stack on the hardware path: ``navdeck serve --robot serial://...`` against the emulated STM32
+base and RPLidar A1 over pseudo-terminals (real time, real websockets, real serial bytes).
+
+Everything runs on wall time, so every wait is a poll-until with a generous deadline; the timing
+assertions (link loss within ~0.3 s + one control period) carry scheduling slack for loaded machines.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import httpx
+import pytest
+import serial
+from websockets.sync.client import connect
+
+from app.cli import main
+from app.embedded import EmbeddedServer, serve_in_thread
+from app.settings import Settings
+from nav.types import Pose2D
+from robot.profiles import load_profile
+from robot.serial.driver import wait_for
+from robot.serial.emulate import EmulatorPair
+from robot.serial.protocol import EStop, Reset
+from robot.serial.pty import PtyPort
+
+PROFILE = load_profile("skid4")
+ROOT = Path(__file__).resolve().parent.parent
+SLACK = 0.4  # s of scheduling slack on timing bounds: these tests run on wall time on loaded machines
+
+
+def make_settings(tmp_path: Path, **overrides: object) -> Settings:
+    base: dict = dict(data_dir=tmp_path, db_url=f"sqlite:///{tmp_path / 'navdeck.db'}", viewer=False)
+    return Settings(**{**base, **overrides})
+
+
+def twist(vx: float = 0.0, wz: float = 0.0) -> str:
+    return json.dumps({"linear": {"x": vx, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
+
+
+def drive(ws, seconds: float, vx: float = 0.0, wz: float = 0.0) -> None:
+    """Send teleop commands at 10 Hz (the dashboard's rate) for ``seconds``."""
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        ws.send(twist(vx, wz))
+        time.sleep(0.1)
+
+
+def hello(ws) -> dict:
+    msg = json.loads(ws.recv(timeout=10))
+    assert msg["type"] == "hello"
+    return msg
+
+
+@pytest.fixture
+def pair(tmp_path: Path) -> Iterator[EmulatorPair]:
+    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=3) as p:
+        yield p
+
+
+@pytest.fixture
+def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
+    with serve_in_thread(make_settings(tmp_path, robot=pair.url())) as srv:
+        # the lidar answers GET_HEALTH and starts streaming within a second or two
+        assert wait_for(lambda: srv.runtime.session.last_scan is not None, timeout=10.0)
+        yield srv
+
+
+def commands_seen(pair: EmulatorPair, kind: type) -> list:
+    return [m for _, m in pair.base.message_log if isinstance(m, kind)]
+
+
+def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
+    pair: EmulatorPair, server: EmbeddedServer
+) -> None:
+    session = server.runtime.session
+    truth0 = pair.pump.truth_pose
+    with connect(f"{server.ws_url}/ws/teleop") as ws:
+        assert hello(ws)["driving"] is True
+        drive(ws, 1.2, vx=0.2)
+        assert session.modes.mode.value == "teleop"
+        assert session.fault is None, session.fault
+        # odometry from the serial encoder counts follows the emulated robot's true motion
+        moved_truth = pair.pump.truth_pose.distance_to(truth0)
+        moved_odom = session.odom_pose.distance_to(Pose2D())
+        assert 0.1 < moved_truth < 0.3, moved_truth
+        assert moved_odom == pytest.approx(moved_truth, abs=0.03)
+        assert session.health()["link"] == "ok"
+        assert session.last_scan is not None and session.health()["scan_age_s"] < 1.0
+        # the robot turns too, and the gyro-fused heading follows the truth
+        th0 = session.odom_pose.theta
+        drive(ws, 0.8, wz=0.8)
+        assert session.odom_pose.theta - th0 > 0.3
+
+        r = httpx.post(f"{server.url}/api/robot/estop", timeout=10)
+        assert r.status_code == 200 and r.json()["mode"] == "estop"
+        assert wait_for(lambda: pair.base.estopped, timeout=2.0)
+        assert commands_seen(pair, EStop)
+        # while latched the base ignores motion and teleop is refused
+        ws.send(twist(vx=0.2))
+        err = json.loads(ws.recv(timeout=10))
+        assert err["type"] == "error" and err["mode"] == "estop"
+        time.sleep(0.3)
+        settled = pair.pump.truth_pose
+        time.sleep(0.4)
+        assert pair.pump.truth_pose.distance_to(settled) < 0.005
+
+        r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
+        assert r.status_code == 200 and r.json()["mode"] == "idle"
+        assert wait_for(lambda: not pair.base.estopped, timeout=2.0)
+        assert commands_seen(pair, Reset)
+        drive(ws, 0.6, vx=0.15)
+        assert pair.pump.truth_pose.distance_to(settled) > 0.03  # drives again after the reset
+
+
+def test_unplug_faults_and_stops_then_replug_recovers(pair: EmulatorPair, server: EmbeddedServer) -> None:
+    session = server.runtime.session
+    with connect(f"{server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        drive(ws, 0.6, vx=0.15)
+        assert session.modes.mode.value == "teleop"
+        pair.base.unplug()
+        t0 = time.monotonic()
+        assert wait_for(lambda: session.modes.mode.value == "fault", timeout=3.0, period=0.005)
+        elapsed = time.monotonic() - t0
+        # 300 ms link watchdog + one 50 ms control period, plus slack for a loaded machine
+        assert elapsed < 0.3 + session.period + SLACK, elapsed
+        assert session.fault is not None and pair.base_path in session.fault
+        assert session.link_state.value == "lost"
+        assert wait_for(lambda: session.last_command.is_zero(), timeout=1.0)
+        state = httpx.get(f"{server.url}/api/robot", timeout=10).json()
+        assert state["mode"] == "fault" and state["health"]["link"] == "lost"
+        # teleop is refused in FAULT; reset is refused while the port is still gone
+        ws.send(twist(vx=0.2))
+        assert json.loads(ws.recv(timeout=10))["mode"] == "fault"
+        r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
+        assert r.status_code == 409 and r.json()["mode"] == "fault"
+        stopped = pair.pump.truth_pose
+        time.sleep(0.3)
+        assert pair.pump.truth_pose.distance_to(stopped) < 0.005  # the motors are off
+
+        pair.base.replug()
+        assert wait_for(lambda: session.link_state.value == "ok", timeout=5.0)
+        assert session.modes.mode.value == "fault"  # a fault latches until the operator resets
+        r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
+        assert r.status_code == 200, r.text
+        assert r.json()["mode"] == "idle" and r.json()["fault"] is None
+        # and the robot can be driven again
+        before = pair.pump.truth_pose
+        drive(ws, 0.6, vx=0.15)
+        assert session.modes.mode.value == "teleop"
+        assert pair.pump.truth_pose.distance_to(before) > 0.03
+
+
+def test_silent_base_faults_after_the_link_timeout(pair: EmulatorPair, server: EmbeddedServer) -> None:
+    """A hung MCU (port still there, no telemetry): FAULT after the 300 ms link watchdog, not before."""
+    session = server.runtime.session
+    with connect(f"{server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        drive(ws, 0.4, vx=0.15)
+        pair.base.faults.stall = True
+        t0 = time.monotonic()
+        assert wait_for(lambda: session.modes.mode.value == "fault", timeout=3.0, period=0.005)
+        elapsed = time.monotonic() - t0
+        # not before the timeout (less the reader's lag behind the last frame), not long after it
+        assert 0.3 - SLACK / 2 < elapsed < 0.3 + session.period + SLACK, elapsed
+        assert "no telemetry" in (session.fault or "")
+        # the base still listens: the host's stop reached it
+        assert wait_for(lambda: pair.base.last_command is not None and pair.base.last_command.vx == 0.0, 1.0)
+        pair.base.faults.stall = False
+        assert wait_for(lambda: session.link_state.value == "ok", timeout=3.0)
+        r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
+        assert r.status_code == 200 and r.json()["mode"] == "idle"
+
+
+def test_lidar_health_error_at_start_is_a_fault_with_the_code(tmp_path: Path) -> None:
+    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=4) as pair:
+        assert pair.lidar is not None
+        pair.lidar.set_health_error(0x8021)
+        with serve_in_thread(make_settings(tmp_path, robot=pair.url())) as server:
+            session = server.runtime.session
+            assert wait_for(lambda: session.modes.mode.value == "fault", timeout=6.0)
+            assert "health error" in (session.fault or "") and "0x8021" in (session.fault or "")
+            assert session.last_command.is_zero()
+            state = httpx.get(f"{server.url}/api/robot", timeout=10).json()
+            assert "0x8021" in state["fault"]
+
+
+def test_lidar_health_error_at_run_time_and_recovery(pair: EmulatorPair, server: EmbeddedServer) -> None:
+    """The A1 comes back from a USB reset reporting an error: FAULT with the code until it is healthy."""
+    session = server.runtime.session
+    assert pair.lidar is not None
+    pair.lidar.set_health_error(0x8021)
+    pair.lidar.unplug()
+    pair.lidar.replug()
+    assert wait_for(lambda: session.modes.mode.value == "fault", timeout=6.0)
+
+    def fault_after_reset() -> str:
+        httpx.post(f"{server.url}/api/robot/reset", timeout=10)
+        time.sleep(3 * session.period)
+        return session.fault or ""
+
+    # the first fault is the unplug; once the port is back the health error is what holds the FAULT
+    assert wait_for(lambda: "0x8021" in fault_after_reset(), timeout=8.0, period=0.1), session.fault
+    pair.lidar.set_health_error(None)
+    assert wait_for(lambda: "0x8021" not in fault_after_reset() and session.fault is None, timeout=10.0)
+    assert session.modes.mode.value == "idle"
+    assert session.health()["scan_age_s"] < 1.0
+
+
+def test_missing_port_exits_2_with_one_line(tmp_path: Path) -> None:
+    proc = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "app.cli",
+            "serve",
+            "--robot",
+            "serial:///dev/nonexistent",
+            "--db",
+            f"sqlite:///{tmp_path / 'navdeck.db'}",
+            "--no-viewer",
+        ],
+        cwd=ROOT,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert proc.returncode == 2, proc.stderr
+    err = proc.stderr.strip()
+    assert "\n" not in err and "Traceback" not in err, err
+    assert "/dev/nonexistent" in err and "not found" in err
+
+
+def test_busy_port_exits_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """Another program holds the base port (exclusively, as SerialDriver itself does)."""
+    port = PtyPort(tmp_path / "ttyUSB0")
+    try:
+        with serial.Serial(port.path, 115200, exclusive=True):
+            argv = ["serve", "--robot", f"serial://{port.path}", "--no-viewer"]
+            assert main([*argv, "--db", f"sqlite:///{tmp_path / 'navdeck.db'}"]) == 2
+    finally:
+        port.close()
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "busy" in err and port.path in err, err
