@@ -1,0 +1,694 @@
+"""Timed Elastic Band local controller (Rösmann, Hoffmann & Bertram, "Integrated online trajectory
+planning and optimization in distinctive topologies", Robotics and Autonomous Systems 88, 2017), as
+source C writes it and ``teb_local_planner`` implements it.
+
+The band B = (Q, tau) is a sequence of poses s_i = [x_i, y_i, beta_i] and the time intervals dT_i
+between them. Each cycle it is initialised from the global path (the first
+``max_global_plan_lookahead_dist`` metres) or warm-started from the previous cycle's band (pruned
+behind the robot and extended to the new local goal), then optimized:
+
+    B* = argmin_B sum_k gamma_k f_k(B)
+
+with scipy's trust-region least squares. Every term is a residual whose square is TEB's penalty
+e(x, x_r, eps, S, n=2) = ((x - (x_r - eps)) / S)^2 when x > x_r - eps: distance to the global path
+(via-points), obstacle clearance below ``min_obstacle_dist`` / ``inflation_dist`` (from a signed
+distance field of the local costmap's lethal cells, sampled bilinearly), each dT_i (time-optimal),
+|v|, |w|, |a| limits, and the differential drive's non-holonomic and forward-drive constraints (TEB's
+EdgeKinematicsDiffDrive; omni bases drop them and get a lateral-velocity limit instead, source C's
+kinematics). Each residual touches at most three consecutive poses and two intervals, so the
+Jacobian is banded: it is computed by finite differences over ``jac_sparsity`` (scipy colours the
+columns, ~12 residual evaluations per Jacobian instead of one per variable) and the trust-region
+steps use LSMR on the sparse matrix.
+
+TEB escapes a blocking obstacle by exploring homotopy classes; navdeck seeds a single band on the
+side of least detour instead: band poses that start inside an obstacle are pushed sideways along
+the path's normal before optimizing. The command sent is the band's first segment, v = body-frame
+displacement / dT_0 and w = (beta_1 - beta_0) / dT_0, after footprint-checking the first
+``feasibility_check_no_poses`` poses against the costmap (TEB's ``isTrajectoryFeasible``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.optimize import least_squares
+from scipy.sparse import coo_matrix, csr_matrix
+
+from nav.control.errors import ControllerError, InvalidPath, NoValidControl, PatienceExceeded
+from nav.control.teb_options import TebOptions
+from nav.costmap.footprint import circle_footprint, footprint_cost
+from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, Costmap, Path, Pose2D, Twist2D, wrap_angle
+
+_FAR = 1e3  # distance reported by an obstacle-free field, m
+
+
+class DistanceField:
+    """Signed distance (m) from the nearest lethal cell's edge: positive in free space, negative
+    inside obstacles (so a pose that starts inside one still has a gradient out of it). Sampled
+    bilinearly between cell centres, so the optimizer sees a continuous function."""
+
+    def __init__(self, costmap: Costmap, unknown_is_lethal: bool = False) -> None:
+        g = costmap.geometry
+        self.geometry = g
+        lethal = costmap.costs == LETHAL_OBSTACLE
+        if unknown_is_lethal:
+            lethal |= costmap.costs == NO_INFORMATION
+        res = g.resolution
+        if not lethal.any():
+            self.field = np.full(costmap.costs.shape, _FAR)
+        else:
+            outside = ndimage.distance_transform_edt(~lethal) * res
+            inside = ndimage.distance_transform_edt(lethal) * res if (~lethal).any() else None
+            if inside is None:
+                self.field = np.full(costmap.costs.shape, -_FAR)
+            else:
+                self.field = np.where(lethal, -(inside - 0.5 * res), outside - 0.5 * res)
+        self._inv = g.origin.inverse() if g.origin.theta != 0.0 else None
+
+    def __call__(self, xy: np.ndarray) -> np.ndarray:
+        """Distances at (M, 2) world points; points off the grid read the nearest edge cell."""
+        g = self.geometry
+        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
+        local = self._inv.transform_points(xy) if self._inv is not None else xy - (g.origin.x, g.origin.y)
+        f = self.field
+        h, w = f.shape
+        u = np.clip(local[:, 0] / g.resolution - 0.5, 0.0, w - 1.0)
+        v = np.clip(local[:, 1] / g.resolution - 0.5, 0.0, h - 1.0)
+        i0 = np.minimum(np.floor(u).astype(np.int64), max(w - 2, 0))
+        j0 = np.minimum(np.floor(v).astype(np.int64), max(h - 2, 0))
+        i1, j1 = np.minimum(i0 + 1, w - 1), np.minimum(j0 + 1, h - 1)
+        fu, fv = u - i0, v - j0
+        top = f[j0, i0] * (1 - fu) + f[j0, i1] * fu
+        bot = f[j1, i0] * (1 - fu) + f[j1, i1] * fu
+        return top * (1 - fv) + bot * fv
+
+
+@dataclass(frozen=True)
+class TebDebug:
+    """One cycle's band, for the 3D view and tests."""
+
+    band: np.ndarray  # (N, 3) optimized poses, map frame
+    dts: np.ndarray  # (N-1,) time intervals, s
+    local_goal: np.ndarray  # (3,) the band's fixed end pose
+    warm_started: bool = False
+    nfev: int = 0  # residual evaluations by the solver (not counting the Jacobian's)
+    njev: int = 0  # Jacobian evaluations
+    cost: float = 0.0  # final 0.5 * sum(residual^2)
+    solve_time: float = 0.0  # wall time of the optimization, s
+    min_clearance: float = math.inf  # smallest centre-to-obstacle distance along the band, m
+    reference: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # local global path
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(N-1, 3) body-frame (vx, vy, wz) of each band segment."""
+        return segment_velocities(self.band, self.dts)
+
+    @property
+    def accelerations(self) -> np.ndarray:
+        """(N-2, 3) TEB accelerations a_i = 2 (v_{i+1} - v_i) / (dT_i + dT_{i+1})."""
+        v = self.velocities
+        return 2.0 * np.diff(v, axis=0) / (self.dts[:-1] + self.dts[1:])[:, None]
+
+
+def segment_velocities(poses: np.ndarray, dts: np.ndarray) -> np.ndarray:
+    """Body-frame (vx, vy, wz) of each band segment, expressed in the segment's start pose."""
+    d = np.diff(poses[:, :2], axis=0)
+    c, s = np.cos(poses[:-1, 2]), np.sin(poses[:-1, 2])
+    vx = (d[:, 0] * c + d[:, 1] * s) / dts
+    vy = (-d[:, 0] * s + d[:, 1] * c) / dts
+    w = wrap_angle(np.diff(poses[:, 2])) / dts
+    return np.column_stack((vx, vy, w))
+
+
+def _bound(x: np.ndarray, lo: float, hi: float, eps: float) -> np.ndarray:
+    """TEB's ``penaltyBoundToInterval`` with source C's scale S = eps: how far ``x`` lies outside
+    [lo + eps, hi - eps], in units of the margin eps. Measuring the violation relative to the margin
+    keeps the limits tight whatever their magnitude (0.26 m/s or 1.5 m/s) against the time term."""
+    return (np.maximum(x - (hi - eps), 0.0) + np.maximum((lo + eps) - x, 0.0)) / max(eps, 1e-6)
+
+
+def _eps(o: TebOptions, limit: float) -> float:
+    return min(o.penalty_epsilon, 0.1 * limit)
+
+
+def _nearest_segments(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Index of the polyline segment (a[k] -> b[k]) nearest to each of (M, 2) points."""
+    ab = b - a
+    len2 = np.maximum(np.einsum("ij,ij->i", ab, ab), 1e-12)
+    ap = pts[:, None, :] - a[None, :, :]
+    t = np.clip(np.einsum("mki,ki->mk", ap, ab) / len2, 0.0, 1.0)
+    diff = ap - t[..., None] * ab[None, :, :]
+    return np.argmin(np.einsum("mki,mki->mk", diff, diff), axis=1)
+
+
+def _segment_distance(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Distance from each of (..., K, 2) points to its own candidate segments (..., K, C, 2),
+    minimised over the C candidates."""
+    ab = b - a
+    len2 = np.maximum(np.sum(ab * ab, axis=-1), 1e-12)
+    ap = pts[..., None, :] - a
+    t = np.clip(np.sum(ap * ab, axis=-1) / len2, 0.0, 1.0)
+    diff = ap - t[..., None] * ab
+    return np.sqrt(np.min(np.sum(diff * diff, axis=-1), axis=-1))
+
+
+def _resample(xy: np.ndarray, theta: np.ndarray, t: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """Resample a polyline with headings and cumulative times to ``n`` poses equally spaced in arc
+    length; returns ((n, 3) poses, (n,) times)."""
+    s = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(xy, axis=0).T))))
+    keep = np.concatenate(([True], np.diff(s) > 1e-9))
+    s, xy, theta, t = s[keep], xy[keep], np.unwrap(theta[keep]), t[keep]
+    if len(s) < 2:
+        poses = np.repeat(np.array([[xy[0, 0], xy[0, 1], theta[0]]]), n, axis=0)
+        return poses, np.full(n, t[0])
+    q = np.linspace(0.0, s[-1], n)
+    poses = np.column_stack((np.interp(q, s, xy[:, 0]), np.interp(q, s, xy[:, 1]), np.interp(q, s, theta)))
+    return poses, np.interp(q, s, t)
+
+
+class TebController:
+    """TEB controller with the same interface as :class:`~nav.control.dwa.DwaController`:
+    ``set_path`` once per (re)plan, ``compute`` once per control cycle, ``reset`` per goal."""
+
+    def __init__(self, options: TebOptions | None = None) -> None:
+        self.options = options or TebOptions()
+        o = self.options
+        self._polygon = (
+            np.asarray(o.footprint, dtype=float) if o.footprint else circle_footprint(o.robot_radius)
+        )
+        self._radius = o.circumscribed_radius
+        self._path: np.ndarray | None = None
+        self._s = np.zeros(0)
+        self._progress = 0
+        self._band: np.ndarray | None = None
+        self._dts: np.ndarray | None = None
+        self._fail_cycles = 0
+        self._sparsity: dict[tuple[int, bool, bool], csr_matrix] = {}
+        self._colours: dict[
+            tuple[int, bool, bool], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+        ] = {}
+        self.last_debug: TebDebug | None = None
+
+    # -- path -------------------------------------------------------------------------------------
+    def set_path(self, path: Path) -> None:
+        """Follow ``path`` (map frame). The band is kept for a warm start unless the goal moved."""
+        poses = np.asarray(path.poses, dtype=float)
+        if poses.ndim != 2 or poses.shape[0] == 0 or poses.shape[1] != 3 or not np.all(np.isfinite(poses)):
+            raise InvalidPath("path must be a non-empty finite (N, 3) array")
+        same_goal = self._path is not None and np.allclose(self._path[-1], poses[-1], atol=1e-6)
+        if self.options.global_plan_overwrite_orientation and not self.options.holonomic and len(poses) > 1:
+            poses = poses.copy()
+            heading = np.arctan2(*np.diff(poses[:, 1::-1], axis=0).T)
+            poses[:-1, 2] = heading
+        self._path = poses
+        seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
+        self._s = np.concatenate(([0.0], np.cumsum(seg)))
+        self._progress = 0
+        if not same_goal:
+            self._band = self._dts = None
+
+    def reset(self) -> None:
+        """Forget the path, the band and the failure counter."""
+        self._path = None
+        self._band = self._dts = None
+        self._fail_cycles = 0
+        self.last_debug = None
+
+    @property
+    def goal(self) -> Pose2D | None:
+        return None if self._path is None else Pose2D.from_array(self._path[-1])
+
+    def _local_path(self, pose: Pose2D, costmap: Costmap) -> np.ndarray:
+        """The path from its point nearest the robot to ``max_global_plan_lookahead_dist`` ahead,
+        cut at the costmap's edge (searching near the previous progress so loops do not confuse)."""
+        assert self._path is not None
+        o = self.options
+        s, p = self._s, self._path
+        lo = int(np.searchsorted(s, s[self._progress] - 1.0, side="left"))
+        hi = int(np.searchsorted(s, s[self._progress] + o.max_global_plan_lookahead_dist, side="right"))
+        cand = p[lo:hi, :2] if hi > lo else p[lo : lo + 1, :2]
+        nearest = lo + int(np.argmin(np.hypot(cand[:, 0] - pose.x, cand[:, 1] - pose.y)))
+        self._progress = nearest
+        end = int(np.searchsorted(s, s[nearest] + o.max_global_plan_lookahead_dist, side="right"))
+        seg = p[nearest : max(end, nearest + 1)]
+        rows, cols = costmap.geometry.world_to_cell(seg[:, :2])
+        inside = costmap.geometry.in_bounds(rows, cols)
+        if not inside.all():
+            seg = seg[: max(int(np.argmin(inside)), 1)]
+        return seg
+
+    # -- band construction --------------------------------------------------------------------------
+    def _band_size(self, length: float) -> int:
+        o = self.options
+        ds = min(o.dt_ref * o.max_vel_x, o.max_pose_separation)
+        return int(np.clip(math.ceil(length / ds) + 1, o.min_samples, o.max_samples))
+
+    def _segment_times(self, poses: np.ndarray, v0: float = -1.0, stop: bool = False) -> np.ndarray:
+        """Time each segment needs (the band's initial dT): the speed limit, or with ``v0 >= 0`` an
+        acceleration-limited profile from speed ``v0`` (and to rest at the end when ``stop``),
+        v(s) = min(v_max, sqrt(v0^2 + 2 a s), sqrt(2 a (S - s))); never faster than the turn
+        rate allows. Starting the optimizer from a consistent timing saves most of its iterations."""
+        o = self.options
+        vmax = max(o.max_vel_x, o.max_vel_y) if o.holonomic else o.max_vel_x
+        acc = min(o.acc_lim_x, o.acc_lim_y) if o.holonomic else o.acc_lim_x
+        dist = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        turn = np.abs(wrap_angle(np.diff(poses[:, 2])))
+        if v0 < 0:
+            t = dist / vmax
+        else:
+            s = np.concatenate(([0.0], np.cumsum(dist)))
+            v = np.minimum(vmax, np.sqrt(min(v0, vmax) ** 2 + 2.0 * acc * s))
+            if stop:
+                v = np.minimum(v, np.sqrt(2.0 * acc * (s[-1] - s)))
+            t = 2.0 * dist / np.maximum(v[:-1] + v[1:], 1e-3)
+        return np.maximum(np.maximum(t, turn / o.max_vel_theta), 0.02)
+
+    def _initial_band(
+        self, pose: Pose2D, velocity: Twist2D, ref: np.ndarray, dfield: DistanceField, stop: bool
+    ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """(poses, dts, warm): warm start from the previous band when it is still near the robot,
+        else a band along the reference path."""
+        o = self.options
+        start = pose.as_array()
+        goal = ref[-1]
+        warm = False
+        if self._band is not None and self._dts is not None:
+            band, dts = self._band, self._dts
+            dist = np.hypot(band[:, 0] - pose.x, band[:, 1] - pose.y)
+            k = int(np.argmin(dist[: max(len(band) // 2, 1) + 1]))
+            if dist[k] < 0.5:
+                warm = True
+                t = np.concatenate(([0.0], np.cumsum(dts)))
+                kept = band[k + 1 : -1]
+                kept_t = t[k + 1 : -1] - t[k]
+                # extend along the path from the previous band's end to the new goal
+                old_end = band[-1, :2]
+                j = int(np.argmin(np.hypot(ref[:, 0] - old_end[0], ref[:, 1] - old_end[1])))
+                ext = ref[j:]
+                xy = np.vstack((start[:2], kept[:, :2], ext[:, :2]))
+                th = np.concatenate(([start[2]], kept[:, 2], ext[:, 2]))
+                t_prev = kept_t[-1] if len(kept_t) else 0.0
+                ext_t = t_prev + np.cumsum(
+                    self._segment_times(np.vstack((kept[-1:] if len(kept) else start[None], ext)))
+                )
+                times = np.concatenate(([0.0], kept_t, ext_t))
+        if not warm:
+            xy = np.vstack((start[:2], ref[:, :2]))
+            th = np.concatenate(([start[2]], ref[:, 2]))
+            times = np.concatenate(([0.0], np.cumsum(self._segment_times(np.column_stack((xy, th))))))
+        length = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+        n = self._band_size(length)
+        poses, t = _resample(xy, th, times, n)
+        poses[0] = start
+        poses[-1, :2] = goal[:2]
+        poses[-1, 2] = poses[-2, 2] + wrap_angle(goal[2] - poses[-2, 2])
+        if not o.holonomic and not warm:
+            chord = np.arctan2(*np.diff(poses[:, 1::-1], axis=0).T)
+            poses[1:-1, 2] = chord[1:]
+        self._push_out(poses, dfield)
+        # Timing restarts from the measured speed every cycle: the previous band's first intervals
+        # belong to poses now behind the robot, and carrying them over slows the band down.
+        dts = self._segment_times(poses, math.hypot(velocity.vx, velocity.vy), stop)
+        return poses, dts, warm
+
+    def _push_out(self, poses: np.ndarray, dfield: DistanceField) -> None:
+        """Homotopy seed: move interior poses that sit inside an obstacle sideways (along the band's
+        normal) to the nearest clear offset, every run of such poses to the same side, the side with
+        the smaller detour (left on a tie). In place."""
+        o = self.options
+        need = self._radius + o.min_obstacle_dist
+        inner = poses[1:-1, :2]
+        if len(inner) == 0:
+            return
+        blocked = dfield(inner) < self._radius
+        if not blocked.any():
+            return
+        tangent = np.gradient(poses[:, :2], axis=0)[1:-1]
+        tangent /= np.maximum(np.hypot(*tangent.T), 1e-9)[:, None]
+        normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
+        offsets = np.arange(1, 51) * 0.02  # up to 1 m
+        idx = np.flatnonzero(blocked)
+        runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
+        for run in runs:
+            best = None
+            for side in (1.0, -1.0):
+                cand = inner[run, None, :] + side * offsets[None, :, None] * normal[run, None, :]
+                ok = (dfield(cand.reshape(-1, 2)) >= need).reshape(len(run), len(offsets))
+                if not ok.any(axis=1).all():
+                    continue
+                first = offsets[np.argmax(ok, axis=1)]
+                if best is None or first.max() < best[1].max() - 1e-9:
+                    best = (side, first)
+            if best is not None:
+                side, first = best
+                poses[1:-1][run, :2] = inner[run] + side * first[:, None] * normal[run]
+        if not self.options.holonomic:
+            chord = np.arctan2(*np.diff(poses[:, 1::-1], axis=0).T)
+            poses[1:-1, 2] = poses[1:-1, 2] + wrap_angle(chord[1:] - poses[1:-1, 2])
+
+    # -- optimization ---------------------------------------------------------------------------------
+    def _jac_sparsity(self, n: int, start_acc: bool, goal_acc: bool) -> csr_matrix:
+        """Banded structure of the residuals' Jacobian (rows as in ``_residuals``)."""
+        key = (n, start_acc, goal_acc)
+        if key in self._sparsity:
+            return self._sparsity[key]
+        o = self.options
+        m = n - 2
+        rows: list[np.ndarray] = []
+        cols: list[np.ndarray] = []
+        row = 0
+
+        def pose_cols(k: np.ndarray) -> list[np.ndarray]:
+            inner = (k >= 1) & (k <= n - 2)
+            return [np.where(inner, 3 * (k - 1) + c, -1) for c in range(3)]
+
+        def dt_cols(j: np.ndarray) -> np.ndarray:
+            return 3 * m + j
+
+        def add(count: int, deps: list[np.ndarray]) -> None:
+            nonlocal row
+            r = row + np.arange(count)
+            for d in deps:
+                d = np.broadcast_to(d, (count,))
+                ok = d >= 0
+                rows.append(r[ok])
+                cols.append(d[ok])
+            row += count
+
+        k_in = np.arange(1, n - 1)
+        seg = np.arange(n - 1)
+        blocks_per_pose = 3  # path, obstacle, inflation
+        for _ in range(blocks_per_pose):
+            add(m, pose_cols(k_in))
+        add(n - 1, [dt_cols(seg)])  # time
+        n_vel = 3 if o.holonomic else 2
+        for _ in range(n_vel):
+            add(n - 1, [*pose_cols(seg), *pose_cols(seg + 1), dt_cols(seg)])
+        n_acc = 3 if o.holonomic else 2
+        j = np.arange(n - 2)
+        for _ in range(n_acc):
+            add(n - 2, [*pose_cols(j), *pose_cols(j + 1), *pose_cols(j + 2), dt_cols(j), dt_cols(j + 1)])
+            if start_acc:
+                add(1, [*pose_cols(np.array([0])), *pose_cols(np.array([1])), dt_cols(np.array([0]))])
+            if goal_acc:
+                add(
+                    1,
+                    [
+                        *pose_cols(np.array([n - 2])),
+                        *pose_cols(np.array([n - 1])),
+                        dt_cols(np.array([n - 2])),
+                    ],
+                )
+        if not o.holonomic:
+            for _ in range(2 + (o.min_turning_radius > 0)):
+                add(n - 1, [*pose_cols(seg), *pose_cols(seg + 1), dt_cols(seg)])
+        r = np.concatenate(rows)
+        c = np.concatenate(cols)
+        mat = coo_matrix((np.ones(len(r)), (r, c)), shape=(row, 3 * m + n - 1)).tocsr()
+        mat.data[:] = 1.0
+        self._sparsity[key] = mat
+        return mat
+
+    def _residuals(
+        self,
+        z: np.ndarray,
+        ends: np.ndarray,
+        ref_a: np.ndarray,
+        ref_b: np.ndarray,
+        dfield: DistanceField,
+        v0: np.ndarray,
+        goal_acc: bool,
+    ) -> np.ndarray:
+        """All weighted residuals of a batch of bands ``z`` (B, interior poses then dT) -> (B, R),
+        TEB's edges in the row order of ``_jac_sparsity``. Batched so the finite-difference
+        Jacobian costs one vectorized call instead of one call per column group."""
+        o = self.options
+        bsz, nvar = z.shape
+        n = (nvar + 7) // 4  # 3 (n-2) + (n-1) = 4n - 7 variables
+        m = n - 2
+        poses = np.empty((bsz, n, 3))
+        poses[:, 0], poses[:, -1] = ends
+        poses[:, 1:-1] = z[:, : 3 * m].reshape(bsz, m, 3)
+        dts = z[:, 3 * m :]
+        inner = poses[:, 1:-1, :2].reshape(-1, 2)
+        out: list[np.ndarray] = []
+        # via-points: stay near the global path (each pose against the path segments around the one
+        # it was nearest to at the start of this optimization)
+        inner_b = poses[:, 1:-1, :2]
+        out.append(math.sqrt(o.weight_viapoint) * _segment_distance(inner_b, ref_a, ref_b))
+        # obstacles: clearance of the footprint circle
+        clear = dfield(inner).reshape(bsz, m) - self._radius
+        # (scaled by S = min_obstacle_dist like the limits: intrusion relative to the margin)
+        scale = max(o.min_obstacle_dist, 0.05)
+        out.append(math.sqrt(o.weight_obstacle) * np.maximum(o.min_obstacle_dist + 0.01 - clear, 0.0) / scale)
+        out.append(math.sqrt(o.weight_inflation) * np.maximum(o.inflation_dist - clear, 0.0) / scale)
+        # time optimal (TEB EdgeTimeOptimal: one residual per interval)
+        out.append(math.sqrt(o.weight_optimaltime) * dts)
+        # velocities in each segment's start frame
+        d = np.diff(poses[..., :2], axis=1)
+        c, s = np.cos(poses[..., 2]), np.sin(poses[..., 2])
+        fwd = d[..., 0] * c[:, :-1] + d[..., 1] * s[:, :-1]
+        vel = np.stack(
+            (
+                fwd / dts,
+                (-d[..., 0] * s[:, :-1] + d[..., 1] * c[:, :-1]) / dts,
+                wrap_angle(np.diff(poses[..., 2], axis=1)) / dts,
+            ),
+            axis=-1,
+        )
+        lim_x = (-o.max_vel_x_backwards, o.max_vel_x, _eps(o, o.max_vel_x))
+        out.append(math.sqrt(o.weight_max_vel_x) * _bound(vel[..., 0], *lim_x))
+        if o.holonomic:
+            lim_y = (-o.max_vel_y, o.max_vel_y, _eps(o, o.max_vel_y))
+            out.append(math.sqrt(o.weight_max_vel_y) * _bound(vel[..., 1], *lim_y))
+        lim_w = (-o.max_vel_theta, o.max_vel_theta, _eps(o, o.max_vel_theta))
+        out.append(math.sqrt(o.weight_max_vel_theta) * _bound(vel[..., 2], *lim_w))
+        # accelerations, including from the measured velocity and (at the final goal) to rest
+        axes = [(0, o.acc_lim_x, o.weight_acc_lim_x)]
+        if o.holonomic:
+            axes.append((1, o.acc_lim_y, o.weight_acc_lim_y))
+        axes.append((2, o.acc_lim_theta, o.weight_acc_lim_theta))
+        mid = dts[:, :-1] + dts[:, 1:]
+        for axis, lim, weight in axes:
+            v = vel[..., axis]
+            parts = [2.0 * np.diff(v, axis=1) / mid, (v[:, :1] - v0[axis]) / dts[:, :1]]
+            if goal_acc:
+                parts.append(-v[:, -1:] / dts[:, -1:])
+            a = np.concatenate(parts, axis=1)
+            out.append(math.sqrt(weight) * _bound(a, -lim, lim, _eps(o, lim)))
+        if not o.holonomic:
+            # TEB EdgeKinematicsDiffDrive: both headings make equal angles with the chord
+            nh = (c[:, :-1] + c[:, 1:]) * d[..., 1] - (s[:, :-1] + s[:, 1:]) * d[..., 0]
+            out.append(math.sqrt(o.weight_kinematics_nh) * nh)
+            out.append(math.sqrt(o.weight_kinematics_forward_drive) * np.maximum(-fwd, 0.0))
+            if o.min_turning_radius > 0:
+                dist = np.hypot(d[..., 0], d[..., 1])
+                turn = np.abs(wrap_angle(np.diff(poses[..., 2], axis=1)))
+                out.append(
+                    math.sqrt(o.weight_kinematics_turning_radius)
+                    * np.maximum(o.min_turning_radius * turn - dist, 0.0)
+                )
+        return np.concatenate(out, axis=1)
+
+    def _colouring(self, sparsity: csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Greedy column colouring (columns sharing no residual share a finite-difference step),
+        returned as (group of each column, number of groups, CSR rows, CSR columns). Computed once
+        per band size."""
+        csc = sparsity.tocsc()
+        ncol = csc.shape[1]
+        group = np.full(ncol, -1, dtype=np.int64)
+        used: list[np.ndarray] = []
+        for col in range(ncol):
+            rows = csc.indices[csc.indptr[col] : csc.indptr[col + 1]]
+            for g, mask in enumerate(used):
+                if not mask[rows].any():
+                    group[col] = g
+                    mask[rows] = True
+                    break
+            else:
+                mask = np.zeros(csc.shape[0], dtype=bool)
+                mask[rows] = True
+                used.append(mask)
+                group[col] = len(used) - 1
+        coo = sparsity.tocoo()
+        order = np.lexsort((coo.col, coo.row))
+        return group, np.array(len(used)), coo.row[order], coo.col[order]
+
+    def optimize(
+        self,
+        poses: np.ndarray,
+        dts: np.ndarray,
+        ref: np.ndarray,
+        dfield: DistanceField,
+        v0: np.ndarray,
+        goal_acc: bool,
+    ) -> tuple[np.ndarray, np.ndarray, object]:
+        """Optimize a band with fixed end poses with ``scipy.optimize.least_squares`` (trust region,
+        sparse Jacobian); returns (poses, dts, scipy result)."""
+        o = self.options
+        n = len(poses)
+        m = n - 2
+        ends = np.stack((poses[0], poses[-1]))
+        ref_xy = ref[:, :2] if len(ref) > 1 else np.vstack((ref[:1, :2], ref[:1, :2]))
+        seg_a, seg_b = ref_xy[:-1], ref_xy[1:]
+        near = _nearest_segments(poses[1:-1, :2], seg_a, seg_b)
+        cand = np.clip(near[:, None] + np.arange(-1, 2)[None, :], 0, len(seg_a) - 1)  # (m, 3)
+        args = (ends, seg_a[cand], seg_b[cand], dfield, v0, goal_acc)
+        key = (n, True, goal_acc)
+        sparsity = self._jac_sparsity(*key)
+        if key not in self._colours:
+            self._colours[key] = self._colouring(sparsity)
+        group, n_groups, jrows, jcols = self._colours[key]
+        ngroups = int(n_groups)
+        indptr = np.concatenate(([0], np.cumsum(np.bincount(jrows, minlength=sparsity.shape[0]))))
+
+        def fun(z: np.ndarray) -> np.ndarray:
+            return self._residuals(z[None, :], *args)[0]
+
+        def jac(z: np.ndarray) -> csr_matrix:
+            h = 1.49e-8 * np.maximum(1.0, np.abs(z))
+            batch = np.repeat(z[None, :], ngroups + 1, axis=0)
+            batch[1 + group, np.arange(len(z))] += h
+            f = self._residuals(batch, *args)
+            data = (f[1 + group[jcols], jrows] - f[0, jrows]) / h[jcols]
+            return csr_matrix((data, jcols, indptr), shape=sparsity.shape)
+
+        x0 = np.concatenate((poses[1:-1].ravel(), np.maximum(dts, 0.011)))
+        lb = np.concatenate((np.full(3 * m, -np.inf), np.full(n - 1, 0.01)))
+        ub = np.full(3 * m + n - 1, np.inf)
+        res = least_squares(
+            fun,
+            x0,
+            jac=jac,
+            bounds=(lb, ub),
+            method="trf",
+            tr_solver="lsmr",
+            x_scale=1.0,
+            tr_options={"maxiter": 15},
+            max_nfev=o.no_inner_iterations * o.no_outer_iterations,
+            xtol=1e-6,
+            ftol=1e-6,
+        )
+        out = poses.copy()
+        out[1:-1] = res.x[: 3 * m].reshape(m, 3)
+        out[:, 2] = wrap_angle(out[:, 2])
+        return out, res.x[3 * m :].copy(), res
+
+    # -- control ----------------------------------------------------------------------------------------
+    def _choose_goal(self, local: np.ndarray, dfield: DistanceField) -> np.ndarray:
+        """The local path cut at its last point the footprint fits at (a goal inside an obstacle
+        cannot be reached; the next cycles move it past the obstacle)."""
+        if len(local) <= 1:
+            return local
+        ok = dfield(local[:, :2]) >= self._radius
+        if ok[-1] or not ok.any():
+            return local
+        last_ok = len(ok) - 1 - int(np.argmax(ok[::-1]))
+        return local[: last_ok + 1]
+
+    def compute(self, pose: Pose2D, velocity: Twist2D, costmap: Costmap) -> tuple[Twist2D, TebDebug]:
+        """One control cycle: optimize the band and return its first command.
+
+        Raises ``NoValidControl`` when the optimized band's first poses collide (the caller should
+        stop the robot), ``PatienceExceeded`` once that has lasted longer than ``failure_tolerance``.
+        """
+        if self._path is None:
+            raise ControllerError("compute called before set_path")
+        if not (pose.is_finite() and velocity.is_finite()):
+            raise ControllerError("pose and velocity must be finite")
+        o = self.options
+        dfield = DistanceField(costmap, o.unknown_is_lethal)
+        goal = self._path[-1]
+        if pose.distance_to(Pose2D.from_array(goal)) <= o.xy_goal_tolerance:
+            return self._rotate_to_goal(pose, goal)
+        local = self._choose_goal(self._local_path(pose, costmap), dfield)
+        at_final = bool(np.allclose(local[-1], goal))
+        stop = at_final and not o.free_goal_vel
+        poses, dts, warm = self._initial_band(pose, velocity, local, dfield, stop)
+        v0 = velocity.as_array()
+        t0 = time.perf_counter()
+        try:
+            poses, dts, res = self.optimize(poses, dts, local, dfield, v0, stop)
+        except ValueError as exc:  # non-finite residuals: a degenerate band
+            self._band = self._dts = None
+            return self._fail(f"band optimization failed: {exc}", poses, dts, local, warm)
+        elapsed = time.perf_counter() - t0
+        self._band, self._dts = poses, dts
+        clearance = float(np.min(dfield(poses[:, :2])))
+        debug = TebDebug(
+            band=poses,
+            dts=dts,
+            local_goal=local[-1].copy(),
+            warm_started=warm,
+            nfev=int(res.nfev),
+            njev=int(res.njev or 0),
+            cost=float(res.cost),
+            solve_time=elapsed,
+            min_clearance=clearance,
+            reference=local,
+        )
+        self.last_debug = debug
+        k = min(o.feasibility_check_no_poses, len(poses) - 1)
+        if k > 0:
+            costs = footprint_cost(costmap, poses[1 : k + 1], self._polygon)
+            hit = costs == LETHAL_OBSTACLE
+            if o.unknown_is_lethal:
+                hit |= costs == NO_INFORMATION
+            if hit.any():
+                self._band = self._dts = None  # re-seed next cycle
+                return self._fail(
+                    f"band pose {int(np.argmax(hit)) + 1} collides", poses, dts, local, warm, debug
+                )
+        self._fail_cycles = 0
+        vx, vy, wz = (float(v) for v in debug.velocities[0])
+        if not o.holonomic:
+            vy = 0.0
+        # The first segment's mean velocity lies up to dT_0 ahead; reaching it within one control
+        # period may exceed the acceleration limit, so it is limited like Nav2's velocity_smoother.
+        dv = o.control_period * np.array([o.acc_lim_x, o.acc_lim_y if o.holonomic else 0.0, o.acc_lim_theta])
+        lo = np.maximum(v0 - dv, [-o.max_vel_x_backwards, -o.max_vel_y, -o.max_vel_theta])
+        hi = np.minimum(v0 + dv, [o.max_vel_x, o.max_vel_y, o.max_vel_theta])
+        out = np.clip([vx, vy, wz], np.minimum(lo, hi), np.maximum(lo, hi))
+        cmd = Twist2D(float(out[0]), float(out[1]) if o.holonomic else 0.0, float(out[2]))
+        return cmd, debug
+
+    def _fail(
+        self,
+        why: str,
+        poses: np.ndarray,
+        dts: np.ndarray,
+        local: np.ndarray,
+        warm: bool,
+        debug: TebDebug | None = None,
+    ) -> tuple[Twist2D, TebDebug]:
+        self.last_debug = debug or TebDebug(
+            band=poses, dts=dts, local_goal=local[-1].copy(), warm_started=warm
+        )
+        self._fail_cycles += 1
+        if self._fail_cycles * self.options.control_period > self.options.failure_tolerance:
+            raise PatienceExceeded(f"no feasible band for {self._fail_cycles} cycles ({why})", {"teb": 1})
+        raise NoValidControl(why, {"teb": 1})
+
+    def _rotate_to_goal(self, pose: Pose2D, goal: np.ndarray) -> tuple[Twist2D, TebDebug]:
+        """Inside ``xy_goal_tolerance``: stop translating and turn to the goal's heading."""
+        o = self.options
+        err = float(wrap_angle(goal[2] - pose.theta))
+        wz = (
+            0.0
+            if abs(err) <= o.yaw_goal_tolerance
+            else float(np.clip(1.5 * err, -o.max_vel_theta, o.max_vel_theta))
+        )
+        band = np.vstack((pose.as_array(), goal))
+        debug = TebDebug(
+            band=band, dts=np.array([max(abs(err) / o.max_vel_theta, 0.01)]), local_goal=goal.copy()
+        )
+        self.last_debug = debug
+        self._fail_cycles = 0
+        return Twist2D(0.0, 0.0, wz), debug
+
+
+__all__ = ["DistanceField", "TebController", "TebDebug", "segment_velocities"]

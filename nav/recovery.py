@@ -1,0 +1,336 @@
+"""Recovery policy: what the navigator does when navigation fails, as Nav2's default behaviour tree
+``navigate_to_pose_w_replanning_and_recovery.xml`` does it.
+
+That tree wraps navigation in a ``RecoveryNode`` with ``number_of_retries`` 6 whose recovery branch
+is a ``RoundRobin`` over clear costmaps -> spin -> wait -> back up: each failure runs the *next*
+recovery in the list (not the whole list), then navigation is retried; after the retry budget is
+spent the goal is aborted. navdeck keeps that shape with an explicit ordered list
+(clear local -> clear global -> spin -> wait -> back up by default), a per-trigger override (a robot
+that is lost should spin until its scan matches the map again, source A, rather than clear
+costmaps), and a structured event for every attempt and every result so each becomes a run event.
+
+Pure state machine: the navigator calls :meth:`RecoveryPolicy.on_failure` with a trigger, ticks the
+returned behaviour through :meth:`RecoveryPolicy.tick` and sends ``policy.command``; it calls
+:meth:`RecoveryPolicy.on_goal_reached` or :meth:`reset` when a goal ends.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from enum import Enum
+from typing import Any
+
+from nav.behaviors import (
+    Behavior,
+    BehaviorConfigError,
+    BehaviorContext,
+    Status,
+    behavior_options,
+    make_behavior,
+)
+from nav.types import ZERO_TWIST, Twist2D
+
+
+class Trigger(Enum):
+    """Why recovery was entered."""
+
+    PLANNER_FAILURE = "planner_failure"
+    CONTROLLER_FAILURE = "controller_failure"
+    NO_PROGRESS = "no_progress"
+    LOCALIZATION_DIVERGENCE = "localization_divergence"
+    SAFETY_STOP = "safety_stop"
+
+
+class RecoveryConfigError(BehaviorConfigError):
+    """The recovery configuration is invalid; the message names the field."""
+
+
+@dataclass(frozen=True)
+class RecoveryStep:
+    """One entry of the recovery list: a behaviour name and its parameters."""
+
+    behavior: str
+    params: Mapping[str, Any] = field(default_factory=dict)
+
+
+#: Nav2's default tree, in navdeck's order and with its BT parameter values.
+DEFAULT_STEPS: tuple[RecoveryStep, ...] = (
+    RecoveryStep("clear_local_costmap"),
+    RecoveryStep("clear_global_costmap"),
+    RecoveryStep("spin", {"spin_dist": 1.57}),
+    RecoveryStep("wait", {"wait_duration": 5.0}),
+    RecoveryStep("back_up", {"backup_dist": 0.30, "backup_speed": 0.15}),
+)
+
+#: Lost robots relocalize first (source A), then fall back on the usual list.
+DEFAULT_TRIGGER_STEPS: Mapping[str, tuple[RecoveryStep, ...]] = {
+    Trigger.LOCALIZATION_DIVERGENCE.value: (
+        RecoveryStep("spin_until_matched"),
+        RecoveryStep("wait", {"wait_duration": 2.0}),
+    ),
+}
+
+
+def _as_step(raw: Any, where: str) -> RecoveryStep:
+    if isinstance(raw, RecoveryStep):
+        return raw
+    if isinstance(raw, str):
+        return RecoveryStep(raw)
+    if isinstance(raw, Mapping):
+        d = dict(raw)
+        name = d.pop("behavior", None)
+        if not isinstance(name, str):
+            raise RecoveryConfigError(f"{where}.behavior: missing behaviour name")
+        params = d.pop("params", None)
+        if params is None:
+            params, d = d, {}
+        if d:
+            raise RecoveryConfigError(f"{where}.{sorted(d)[0]}: unknown key")
+        return RecoveryStep(name, dict(params))
+    raise RecoveryConfigError(f"{where}: expected a behaviour name or a table, got {type(raw).__name__}")
+
+
+@dataclass(frozen=True)
+class RecoveryOptions:
+    """Options of :class:`RecoveryPolicy`; validated on construction (start-up or API)."""
+
+    steps: tuple[RecoveryStep, ...] = DEFAULT_STEPS
+    """Ordered recovery list, run round-robin (one step per failure), Nav2's RoundRobin node."""
+    number_of_retries: int = 6
+    """Recoveries allowed per goal before it is aborted (Nav2 RecoveryNode ``number_of_retries``,
+    6 in navigate_to_pose_w_replanning_and_recovery.xml)."""
+    trigger_steps: Mapping[str, tuple[RecoveryStep, ...]] = field(
+        default_factory=lambda: dict(DEFAULT_TRIGGER_STEPS)
+    )
+    """Per-trigger lists (by :class:`Trigger` value) used instead of ``steps`` for that trigger."""
+    enabled_triggers: tuple[str, ...] = tuple(t.value for t in Trigger)
+    """Triggers that start recovery; any other failure aborts the goal at once."""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.number_of_retries, int) or self.number_of_retries < 0:
+            raise RecoveryConfigError(
+                f"recovery.number_of_retries must be a non-negative integer, got {self.number_of_retries!r}"
+            )
+        object.__setattr__(self, "steps", self._validate_list(self.steps, "recovery.steps"))
+        known_triggers = {t.value for t in Trigger}
+        checked: dict[str, tuple[RecoveryStep, ...]] = {}
+        for key, lst in dict(self.trigger_steps).items():
+            k = key.value if isinstance(key, Trigger) else key
+            if k not in known_triggers:
+                raise RecoveryConfigError(
+                    f"recovery.trigger_steps.{k}: unknown trigger; known: {', '.join(sorted(known_triggers))}"
+                )
+            checked[k] = self._validate_list(lst, f"recovery.trigger_steps.{k}")
+        object.__setattr__(self, "trigger_steps", checked)
+        enabled = tuple(t.value if isinstance(t, Trigger) else t for t in self.enabled_triggers)
+        for i, t in enumerate(enabled):
+            if t not in known_triggers:
+                raise RecoveryConfigError(f"recovery.enabled_triggers[{i}]: unknown trigger {t!r}")
+        object.__setattr__(self, "enabled_triggers", enabled)
+
+    @staticmethod
+    def _validate_list(raw: Sequence[Any], where: str) -> tuple[RecoveryStep, ...]:
+        if isinstance(raw, str | bytes) or not isinstance(raw, Sequence):
+            raise RecoveryConfigError(f"{where}: expected a list of behaviours")
+        if len(raw) == 0:
+            raise RecoveryConfigError(f"{where}: the recovery list is empty")
+        steps = tuple(_as_step(r, f"{where}[{i}]") for i, r in enumerate(raw))
+        for i, s in enumerate(steps):
+            try:
+                behavior_options(s.behavior, s.params, f"{where}[{i}]")
+            except RecoveryConfigError:
+                raise
+            except BehaviorConfigError as exc:
+                raise RecoveryConfigError(str(exc)) from exc
+        return steps
+
+    @classmethod
+    def from_mapping(cls, data: Mapping[str, Any]) -> RecoveryOptions:
+        """From parsed TOML/JSON: ``{"steps": ["spin", {"behavior": "wait", "wait_duration": 2}],
+        "number_of_retries": 6, "trigger_steps": {...}, "enabled_triggers": [...]}``."""
+        d = dict(data)
+        known = {"steps", "number_of_retries", "trigger_steps", "enabled_triggers"}
+        bad = sorted(set(d) - known)
+        if bad:
+            raise RecoveryConfigError(f"recovery.{bad[0]}: unknown field; known: {', '.join(sorted(known))}")
+        kwargs: dict[str, Any] = {}
+        if "steps" in d:
+            kwargs["steps"] = d["steps"]
+        if "number_of_retries" in d:
+            kwargs["number_of_retries"] = d["number_of_retries"]
+        if "trigger_steps" in d:
+            if not isinstance(d["trigger_steps"], Mapping):
+                raise RecoveryConfigError("recovery.trigger_steps: expected a table of lists")
+            kwargs["trigger_steps"] = dict(d["trigger_steps"])
+        if "enabled_triggers" in d:
+            kwargs["enabled_triggers"] = tuple(d["enabled_triggers"])
+        return cls(**kwargs)
+
+
+@dataclass(frozen=True)
+class RecoveryEvent:
+    """One structured record: an attempt starting, its result, or the policy giving up."""
+
+    kind: str  # "attempt" | "result" | "exhausted" | "rejected"
+    t: float
+    trigger: str
+    behavior: str = ""
+    attempt: int = 0  # 1-based attempt number within the current goal
+    retries_left: int = 0
+    status: str = ""  # for "result": succeeded | failed
+    reason: str = ""
+    detail: str = ""  # what the trigger said (the controller's or planner's message)
+
+    def as_dict(self) -> dict[str, Any]:
+        return asdict(self)
+
+
+class RecoveryPolicy:
+    """Chooses and runs recovery behaviours. See the module docstring for the protocol."""
+
+    def __init__(
+        self, options: RecoveryOptions | None = None, on_event: Callable[[RecoveryEvent], None] | None = None
+    ) -> None:
+        self.options = options or RecoveryOptions()
+        self.on_event = on_event
+        self.events: list[RecoveryEvent] = []
+        self.attempts = 0
+        self.active: Behavior | None = None
+        self.active_trigger: Trigger | None = None
+        self._cursor: dict[str, int] = {}
+        self.last_status: Status = Status.SUCCEEDED
+
+    # ------------------------------------------------------------------ state
+    @property
+    def retries_left(self) -> int:
+        return max(self.options.number_of_retries - self.attempts, 0)
+
+    @property
+    def exhausted(self) -> bool:
+        return self.attempts >= self.options.number_of_retries
+
+    @property
+    def command(self) -> Twist2D:
+        """Velocity to send this cycle: the active behaviour's, else zero."""
+        return self.active.command if self.active is not None else ZERO_TWIST
+
+    def reset(self) -> None:
+        """New goal: full retry budget, round robins back to their first step."""
+        self.attempts = 0
+        self.active = None
+        self.active_trigger = None
+        self._cursor.clear()
+
+    def on_goal_reached(self) -> None:
+        """Navigation succeeded: like Nav2's RecoveryNode, the retry count starts over."""
+        self.reset()
+
+    def steps_for(self, trigger: Trigger) -> tuple[RecoveryStep, ...]:
+        return self.options.trigger_steps.get(trigger.value, self.options.steps)
+
+    def _emit(self, event: RecoveryEvent) -> None:
+        self.events.append(event)
+        if self.on_event is not None:
+            self.on_event(event)
+
+    # ------------------------------------------------------------------ protocol
+    def on_failure(self, trigger: Trigger, ctx: BehaviorContext, detail: str = "") -> Behavior | None:
+        """Navigation failed for ``trigger``: start the next recovery and return it, or return None
+        when the goal must be aborted (budget spent, or trigger not enabled). A behaviour that fails
+        immediately on start is reported and counts as an attempt; the next call moves on."""
+        if trigger.value not in self.options.enabled_triggers:
+            self._emit(
+                RecoveryEvent("rejected", ctx.now, trigger.value, reason="trigger not enabled", detail=detail)
+            )
+            return None
+        if self.exhausted:
+            self._emit(
+                RecoveryEvent(
+                    "exhausted",
+                    ctx.now,
+                    trigger.value,
+                    attempt=self.attempts,
+                    reason=f"number_of_retries ({self.options.number_of_retries}) spent",
+                    detail=detail,
+                )
+            )
+            self.active = None
+            return None
+        steps = self.steps_for(trigger)
+        key = trigger.value if trigger.value in self.options.trigger_steps else "*"
+        i = self._cursor.get(key, 0)
+        self._cursor[key] = (i + 1) % len(steps)
+        step = steps[i]
+        self.attempts += 1
+        behavior = make_behavior(step.behavior, step.params)
+        self.active, self.active_trigger = behavior, trigger
+        self._emit(
+            RecoveryEvent(
+                "attempt",
+                ctx.now,
+                trigger.value,
+                behavior=behavior.name,
+                attempt=self.attempts,
+                retries_left=self.retries_left,
+                detail=detail,
+            )
+        )
+        status = behavior.start(ctx)
+        if status is not Status.RUNNING:
+            self._finish(ctx, status)
+        return behavior
+
+    def tick(self, ctx: BehaviorContext) -> Status:
+        """Tick the active behaviour; on its end emit a result event and clear it."""
+        if self.active is None:
+            raise RuntimeError("RecoveryPolicy.tick without an active behaviour")
+        status = self.active.tick(ctx)
+        if status is not Status.RUNNING:
+            self._finish(ctx, status)
+        return status
+
+    def _finish(self, ctx: BehaviorContext, status: Status) -> None:
+        assert self.active is not None and self.active_trigger is not None
+        self._emit(
+            RecoveryEvent(
+                "result",
+                ctx.now,
+                self.active_trigger.value,
+                behavior=self.active.name,
+                attempt=self.attempts,
+                retries_left=self.retries_left,
+                status=status.value,
+                reason=self.active.reason,
+            )
+        )
+        self.last_status = status
+        self.active = None
+
+    def run_to_end(
+        self,
+        ctx: BehaviorContext,
+        advance: Callable[[BehaviorContext, Twist2D], None],
+        max_ticks: int = 10_000,
+    ) -> Status:
+        """Drive the active behaviour to its end, ``advance(ctx, command)`` moving the world and
+        the clock between ticks (a simulator step or a test's integrator). RUNNING if ``max_ticks``
+        ran out first."""
+        for _ in range(max_ticks):
+            if self.active is None:
+                return self.last_status
+            advance(ctx, self.command)
+            self.tick(ctx)
+        return self.last_status if self.active is None else Status.RUNNING
+
+
+__all__ = [
+    "DEFAULT_STEPS",
+    "DEFAULT_TRIGGER_STEPS",
+    "RecoveryConfigError",
+    "RecoveryEvent",
+    "RecoveryOptions",
+    "RecoveryPolicy",
+    "RecoveryStep",
+    "Trigger",
+]
