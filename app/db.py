@@ -45,12 +45,25 @@ def alembic_config(engine: Engine):
     return cfg
 
 
+# Any fixed 64-bit key: every navdeck process sharing a PostgreSQL database serializes on it.
+MIGRATION_LOCK_KEY = 0x6E617664_6D696772  # "navdmigr"
+
+
+def _serialize_migrations(conn) -> None:
+    """On PostgreSQL, take a transaction-scoped advisory lock before Alembic looks at the schema, so
+    two robots of a fleet starting at once do not both run the same DDL (the second waits, then sees
+    the schema at head and does nothing). SQLite needs nothing: its writers are already serialized."""
+    if conn.dialect.name == "postgresql":
+        conn.exec_driver_sql(f"SELECT pg_advisory_xact_lock({MIGRATION_LOCK_KEY})")
+
+
 def migrate(engine: Engine, revision: str = "head") -> None:
-    """Upgrade the database to ``revision`` (default: the newest)."""
+    """Upgrade the database to ``revision`` (default: the newest); safe to run concurrently."""
     from alembic import command
 
     cfg = alembic_config(engine)
     with engine.begin() as conn:
+        _serialize_migrations(conn)
         cfg.attributes["connection"] = conn
         command.upgrade(cfg, revision)
 
@@ -60,6 +73,7 @@ def downgrade(engine: Engine, revision: str = "base") -> None:
 
     cfg = alembic_config(engine)
     with engine.begin() as conn:
+        _serialize_migrations(conn)
         cfg.attributes["connection"] = conn
         command.downgrade(cfg, revision)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import contextlib
 import importlib
 import logging
@@ -29,13 +30,68 @@ def _route_modules() -> list:
     return [m for m in mods if hasattr(m, "router")]
 
 
+async def _sweep_leases(guard, period: float = 1.0) -> None:
+    """Free a lease whose REST-only holder went quiet (the websocket case is handled on close)."""
+    while True:
+        await asyncio.sleep(period)
+        try:
+            guard.sweep()
+        except Exception:
+            log.exception("lease sweep failed")
+
+
+def _document_validation_errors(app: FastAPI) -> None:
+    """Make the OpenAPI schema say what our 422 handler really returns (``{"detail": str, "errors":
+    [{"field", "message"}]}``) instead of FastAPI's default list-shaped ``detail``; schemathesis checks
+    every response against the schema (docs/reliability.md)."""
+    default_openapi = app.openapi
+
+    def openapi() -> dict:
+        if app.openapi_schema is None:
+            schema = default_openapi()
+            schemas = schema.get("components", {}).get("schemas", {})
+            if "HTTPValidationError" in schemas:
+                schemas["HTTPValidationError"] = {
+                    "title": "HTTPValidationError",
+                    "type": "object",
+                    "required": ["detail"],
+                    "properties": {
+                        "detail": {"type": "string", "title": "Detail", "description": "every error, joined"},
+                        "errors": {
+                            "type": "array",
+                            "items": {
+                                "type": "object",
+                                "required": ["field", "message"],
+                                "properties": {"field": {"type": "string"}, "message": {"type": "string"}},
+                            },
+                        },
+                    },
+                }
+            app.openapi_schema = schema
+        return app.openapi_schema
+
+    app.openapi = openapi  # type: ignore[method-assign]
+
+
 def create_app(runtime: Runtime) -> FastAPI:
+    from app.auth import UserStore
+    from app.hardening import HardeningMiddleware
+    from app.security import AuthContext, LeaseGuard, SecurityMiddleware, make_viz_authorize
+
+    settings = runtime.settings
+    guard = LeaseGuard(runtime.lease, runtime.session, idle_s=settings.lease_idle_s)
+    auth = AuthContext(
+        UserStore(runtime.engine, session_ttl_s=settings.session_ttl_s), bool(settings.require_auth)
+    )
+
     @contextlib.asynccontextmanager
     async def lifespan(app: FastAPI):
         runtime.start()
+        sweeper = asyncio.create_task(_sweep_leases(guard))
         try:
             yield
         finally:
+            sweeper.cancel()
             runtime.close()
 
     app = FastAPI(
@@ -45,6 +101,11 @@ def create_app(runtime: Runtime) -> FastAPI:
         lifespan=lifespan,
     )
     app.state.runtime = runtime
+    app.state.guard = guard
+    app.state.auth = auth
+    app.add_middleware(SecurityMiddleware, auth=auth, guard=guard)
+    # Outermost (added last): size limits, security headers and websocket Origin checks (app/hardening.py).
+    app.add_middleware(HardeningMiddleware, max_upload_bytes=settings.max_upload_bytes)
 
     @app.exception_handler(RequestValidationError)
     async def _validation(_req: Request, exc: RequestValidationError) -> JSONResponse:
@@ -58,8 +119,10 @@ def create_app(runtime: Runtime) -> FastAPI:
     for module in _route_modules():
         app.include_router(module.router)
 
+    _document_validation_errors(app)
+
     from app.viewer.relay import make_router
 
-    app.include_router(make_router(lambda: runtime.viewer))
+    app.include_router(make_router(lambda: runtime.viewer, make_viz_authorize(auth.require_auth)))
     app.mount("/", StaticFiles(directory=FRONTEND_DIR, html=True), name="frontend")
     return app

@@ -12,6 +12,7 @@ from app.control import ControlLease
 from app.db import make_engine, migrate
 from app.drivers import make_driver
 from app.map_store import MapStore
+from app.robots import register_robot
 from app.session import Session, SessionOptions
 from app.settings import Settings
 from nav.types import Pose2D
@@ -31,6 +32,7 @@ class Runtime:
     lease: ControlLease = field(default_factory=ControlLease)
     viewer: object | None = None
     world_name: str | None = None
+    robot_id: int | None = None  # this robot's row in the robots table (app/robots.py)
     features: dict[str, object] = field(default_factory=dict)  # feature module name -> its handle
     # What a click-and-drag in the 3D view does, by kind ("goal", "initial_pose"); set by features.
     pose_input_handlers: dict[str, Callable[[Pose2D], None]] = field(default_factory=dict)
@@ -43,6 +45,7 @@ class Runtime:
         try:
             engine = make_engine(settings.db_url)
             migrate(engine)
+            robot_id = register_robot(engine, settings.robot_name, profile.name, driver=settings.robot)
             maps = MapStore(engine)
             _register_stock_maps(maps)
         except Exception:
@@ -56,7 +59,7 @@ class Runtime:
             options=SessionOptions(rate_hz=settings.rate_hz),
             robot_name=settings.robot_name,
         )
-        return cls(settings, profile, engine, maps, session, world_name=bundle.world_name)
+        return cls(settings, profile, engine, maps, session, world_name=bundle.world_name, robot_id=robot_id)
 
     def start(self) -> None:
         from app.features import discover

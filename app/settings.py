@@ -30,11 +30,17 @@ class Settings:
     viewer: bool = True  # start the viser 3D view
     max_upload_bytes: int = 64 * 1024 * 1024
     telemetry_hz: float = 15.0
+    # Sign-in (app/auth.py). None: required unless bound to localhost; tests force it either way.
+    require_auth: bool | None = None
+    session_ttl_s: float = 12 * 3600.0  # a sign-in lasts this long (cookie and database row)
+    lease_idle_s: float = 15.0  # a lease held over REST only (no teleop socket) frees after this idle time
 
     def __post_init__(self) -> None:
         self.data_dir = Path(self.data_dir)
         if not self.db_url:
             self.db_url = default_db_url(self.data_dir)
+        if self.require_auth is None:
+            self.require_auth = not self.is_local
 
     @property
     def is_local(self) -> bool:

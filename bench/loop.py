@@ -30,9 +30,14 @@ def loop_jitter(clients: int = 5, seconds: float = 10.0) -> list[Figure]:
         with serve_in_thread(settings) as server:
             stop = threading.Event()
             counts = [0] * clients
-            threads = [threading.Thread(target=_telemetry_client, daemon=True,
-                                        args=(f"{server.ws_url}/ws/telemetry?hz=15", stop, counts, i))
-                       for i in range(clients)]
+            threads = [
+                threading.Thread(
+                    target=_telemetry_client,
+                    daemon=True,
+                    args=(f"{server.ws_url}/ws/telemetry?hz=15", stop, counts, i),
+                )
+                for i in range(clients)
+            ]
             for t in threads:
                 t.start()
             time.sleep(1.0)  # warm-up

@@ -44,3 +44,48 @@ def client(tmp_path: Path):
     runtime = Runtime.build(make_settings(tmp_path))
     with TestClient(create_app(runtime)) as c:
         yield c
+
+
+# --------------------------------------------------------------------------- databases (issue 9)
+# One throw-away PostgreSQL server per session (tests/pg.py); tests that take ``db_url`` run once on
+# SQLite and once on PostgreSQL. The PostgreSQL variants are skipped, with the reason, only when the
+# server cannot be installed or started.
+
+
+@pytest.fixture(scope="session")
+def pg_server():
+    from pg import PostgresUnavailable, start_server
+
+    try:
+        server = start_server()
+    except PostgresUnavailable as exc:
+        pytest.skip(f"PostgreSQL unavailable: {exc}")
+    yield server
+    server.stop()
+
+
+@pytest.fixture
+def pg_url(pg_server) -> str:
+    """A fresh, empty PostgreSQL database (SQLAlchemy URL)."""
+    return pg_server.create_database()
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, tmp_path: Path) -> str:
+    """An empty database of each kind: a SQLite file, or a fresh database on the session's PostgreSQL."""
+    if request.param == "sqlite":
+        return f"sqlite:///{tmp_path / 'navdeck.db'}"
+    return request.getfixturevalue("pg_url")
+
+
+@pytest.fixture
+def db_client(tmp_path: Path, db_url: str):
+    """Like ``client`` but on each database kind (``db_url``)."""
+    from fastapi.testclient import TestClient
+
+    from app.main import create_app
+    from app.runtime import Runtime
+
+    runtime = Runtime.build(make_settings(tmp_path, db_url=db_url))
+    with TestClient(create_app(runtime)) as c:
+        yield c

@@ -4,7 +4,18 @@ export const $ = (sel) => document.querySelector(sel);
 export const wsURL = (path) => `${location.protocol === "https:" ? "wss" : "ws"}://${location.host}${path}`;
 
 /** Dashboard-wide state every feature module may read. */
-export const state = { mode: null, allowed: [], omni: false, limits: null, robot: null, driving: false, last: null };
+export const state = {
+  mode: null, allowed: [], omni: false, limits: null, robot: null, driving: false, last: null,
+  me: null, // GET /api/auth/me: role, username, can_drive
+};
+
+/** Timings the browser tests and the latency report read (ms since navigation start / epoch ms). */
+export const perf = (window.__navdeck = window.__navdeck || { firstFrameMs: null, keyDownAt: [], telemetryAt: null });
+
+/** Sign-in required and missing (401): go to the login page, then come back here. */
+export function toLogin() {
+  location.assign(`/login.html?next=${encodeURIComponent(location.pathname + location.search)}`);
+}
 
 const telemetryListeners = [];
 /** Call ``fn(t)`` with every telemetry message (t is /ws/telemetry's JSON). */
@@ -34,10 +45,13 @@ export async function api(method, path, body) {
   const res = await fetch(path, opts);
   let data = null;
   try { data = await res.json(); } catch { /* empty body */ }
+  if (res.status === 401 && !path.startsWith("/api/auth/")) { toLogin(); throw new Error("sign in required"); }
   if (!res.ok) {
     const why = data && data.detail ? (typeof data.detail === "string" ? data.detail : JSON.stringify(data.detail)) : res.statusText;
     const allowed = data && data.allowed ? ` (allowed: ${data.allowed.join(", ") || "none"})` : "";
-    message(`${method} ${path} refused: ${why}${allowed}`, "error");
+    const nearest = data && data.nearest_free ? ` (nearest free: ${fmt(data.nearest_free.x)}, ${fmt(data.nearest_free.y)})` : "";
+    const missing = res.status === 404 && why === "Not Found" ? " (this server does not have that feature yet)" : "";
+    message(`${method} ${path} refused (${res.status}): ${why}${allowed}${nearest}${missing}`, "error");
     const err = new Error(why);
     err.status = res.status;
     err.data = data;
@@ -58,4 +72,40 @@ export function panelSection(id, title) {
   sec.innerHTML = `<h2 id="${id}-h">${title}</h2>`;
   $("#feature-panels").appendChild(sec);
   return sec;
+}
+
+/** Upload a FormData with progress (XMLHttpRequest: fetch has no upload progress); resolves to JSON. */
+export function upload(path, form, onProgress) {
+  return new Promise((resolve, reject) => {
+    const xhr = new XMLHttpRequest();
+    xhr.open("POST", path);
+    xhr.responseType = "json";
+    xhr.upload.onprogress = (ev) => { if (ev.lengthComputable) onProgress(ev.loaded / ev.total); };
+    xhr.onload = () => {
+      const data = xhr.response;
+      if (xhr.status === 401) { toLogin(); reject(new Error("sign in required")); return; }
+      if (xhr.status >= 200 && xhr.status < 300) { onProgress(1); resolve(data); return; }
+      const why = data && data.detail ? (typeof data.detail === "string" ? data.detail : JSON.stringify(data.detail)) : xhr.statusText;
+      message(`upload refused (${xhr.status}): ${why}`, "error");
+      const err = new Error(why);
+      err.status = xhr.status;
+      reject(err);
+    };
+    xhr.onerror = () => { message("upload failed: network error", "error"); reject(new Error("network error")); };
+    xhr.send(form);
+  });
+}
+
+/** Who am I (role, sign-in); fills the top bar's user box when sign-in is on. */
+export async function loadMe() {
+  try { state.me = await api("GET", "/api/auth/me"); } catch { state.me = null; }
+  const box = $("#user-box");
+  if (box && state.me && state.me.signed_in) {
+    box.hidden = false;
+    $("#user-name").textContent = `${state.me.username} (${state.me.role})`;
+    $("#sign-out").addEventListener("click", async () => {
+      try { await api("POST", "/api/auth/logout"); } finally { toLogin(); }
+    });
+  }
+  return state.me;
 }

@@ -1,14 +1,24 @@
-// Mode badge, mode buttons, status panel, e-stop and reset.
+// Mode badge, mode buttons, status panel (mode, behaviour, battery, link, localization, goal), e-stop, reset.
 import { $, api, fmt, message, onTelemetry, state } from "./core.js";
+
+const deg = (rad) => fmt((rad * 180) / Math.PI, 0);
+
+function eta(s) {
+  if (s === null || s === undefined) return "–";
+  return s >= 90 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${fmt(s, 0)} s`;
+}
 
 function render(t) {
   state.mode = t.mode;
   state.allowed = t.allowed_modes || [];
   const badge = $("#mode-badge");
   badge.textContent = t.mode + (t.fault ? `: ${t.fault}` : "");
-  badge.className = `badge ${t.mode}`;
-  $("#st-mode").textContent = t.mode + (t.behavior ? ` (${t.behavior})` : "");
-  $("#st-pose").textContent = `x ${fmt(t.pose.x)}  y ${fmt(t.pose.y)}  θ ${fmt(t.pose.theta * 180 / Math.PI, 0)}°`;
+  badge.className = `badge mode-${t.mode}`;
+  $("#st-mode").textContent = t.mode;
+  const nav = t.navigation || null;
+  const behavior = t.behavior || (nav && nav.active ? nav.activity : null);
+  $("#st-behavior").textContent = behavior || "–";
+  $("#st-pose").textContent = `x ${fmt(t.pose.x)}  y ${fmt(t.pose.y)}  θ ${deg(t.pose.theta)}°`;
   $("#st-speed").textContent = `${fmt(t.velocity.linear.x)} m/s  ${fmt(t.velocity.angular.z)} rad/s`;
   const cl = t.clamped && t.clamped.length ? ` (clamped: ${t.clamped.join(", ")})` : "";
   $("#st-cmd").textContent = `${fmt(t.command.linear.x)} m/s  ${fmt(t.command.angular.z)} rad/s${cl}`;
@@ -16,16 +26,42 @@ function render(t) {
   const link = $("#st-link");
   link.textContent = `${h.link || "?"}${h.link_reason ? ": " + h.link_reason : ""}  scan age ${fmt(h.scan_age_s, 2)} s`;
   link.className = h.link === "ok" ? "ok-text" : "bad-text";
-  $("#st-battery").textContent = h.battery_v ? `${fmt(h.battery_v, 1)} V (${fmt(h.battery_pct, 0)}%)` : "–";
+  const batt = $("#st-battery");
+  batt.textContent = h.battery_v ? `${fmt(h.battery_v, 1)} V (${fmt(h.battery_pct, 0)}%)` : "–";
+  batt.className = h.battery_pct !== null && h.battery_pct !== undefined && h.battery_pct < 20 ? "bad-text" : "";
+  const loc = t.localization || null;
+  const locEl = $("#st-loc");
+  if (loc) {
+    const q = loc.quality !== undefined ? `${fmt(loc.quality * 100, 0)}%` : "?";
+    locEl.textContent = `${loc.localized ? "localized" : loc.global_running ? "searching…" : "not localized"}, quality ${q}` +
+      (loc.particles ? `, ${loc.particles} particles` : "");
+    locEl.className = loc.localized && loc.quality >= 0.5 ? "ok-text" : "warn-text";
+  } else locEl.textContent = "–";
+  const goal = $("#st-goal");
+  if (nav && nav.active && nav.goal) {
+    goal.textContent = `${fmt(nav.distance_remaining)} m to go, ETA ${eta(nav.eta_s)}`;
+  } else if (nav && nav.outcome) {
+    const o = nav.outcome;
+    goal.textContent = typeof o === "string" ? o : `${o.kind || o.outcome || "done"}${o.reason ? ": " + o.reason : ""}`;
+  } else goal.textContent = t.goal ? `goal x ${fmt(t.goal.x)} y ${fmt(t.goal.y)}` : "–";
   const loop = h.loop || {};
   $("#st-loop").textContent = loop.lateness_p99_ms !== undefined
     ? `p99 late ${fmt(loop.lateness_p99_ms, 1)} ms, tick ${fmt(loop.tick_p50_ms, 1)} ms` : "–";
   const holder = t.control && t.control.holder;
   $("#st-control").textContent = holder ? `${holder.name}${state.driving ? " (you)" : ""}` : "nobody";
+  const viewer = state.me && !state.me.can_drive;
   for (const b of document.querySelectorAll("[data-mode]")) {
     b.classList.toggle("active", b.dataset.mode === t.mode);
-    b.disabled = b.dataset.mode !== t.mode && !state.allowed.includes(b.dataset.mode);
+    b.disabled = viewer || (b.dataset.mode !== t.mode && !state.allowed.includes(b.dataset.mode));
   }
+}
+
+/** Viewers watch: every control that would move the robot is disabled (the server refuses them anyway). */
+export function applyRole() {
+  if (!state.me || state.me.can_drive) return;
+  document.body.classList.add("viewer");
+  for (const el of document.querySelectorAll(".panel button, .panel input, #reset, #take-control")) el.disabled = true;
+  document.getElementById("joystick")?.setAttribute("aria-disabled", "true");
 }
 
 export async function estop() {

@@ -1,5 +1,10 @@
-// Keyboard and on-screen teleop over /ws/teleop (geometry_msgs/Twist-shaped JSON).
-import { $, message, state, wsURL } from "./core.js";
+// Teleop over /ws/teleop (geometry_msgs/Twist-shaped JSON): keyboard, on-screen pad, joystick, gamepad.
+//
+// Every input is a "source" giving a normalised command (-1..1 per axis); the first active source in
+// priority order drives (keys > pad > joystick > gamepad). A change is sent at once (key-press latency),
+// and re-sent every 100 ms while held so the server's deadman (0.5 s) keeps the robot moving; on release
+// one zero command is sent and the server's deadman covers a lost one.
+import { $, message, perf, state, wsURL } from "./core.js";
 import { estop } from "./status.js";
 
 const KEYMAP = {
@@ -7,33 +12,71 @@ const KEYMAP = {
   a: [0, 0, 1], arrowleft: [0, 0, 1], d: [0, 0, -1], arrowright: [0, 0, -1],
   q: [0, 1, 0], e: [0, -1, 0],
 };
-const keys = new Set();
+const PRIORITY = ["keys", "pad", "joystick", "gamepad"];
+const SLOW = 0.3; // Shift: 30 % of the chosen speed
+
+const keys = new Set(); // keyboard keys held
+const padKeys = new Set(); // on-screen buttons held
+const sources = new Map(); // name -> {vx, vy, wz} in -1..1, or absent
 state.keys = keys;
 let socket = null;
 let slowHeld = false;
 let lastSentZero = true;
 
 function connect() {
-  socket = new WebSocket(wsURL("/ws/teleop?name=dashboard"));
+  socket = new WebSocket(wsURL("/ws/teleop"));
   socket.onmessage = (ev) => {
     const m = JSON.parse(ev.data);
-    if (m.type === "hello" || m.type === "control") state.driving = !!m.driving;
-    if (m.type === "error") message(`teleop: ${m.error}`, "error");
+    if (m.type === "hello" || m.type === "control") {
+      state.driving = !!m.driving;
+      state.role = m.role || state.role;
+      document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
+    }
+    if (m.type === "error") {
+      message(`teleop refused: ${m.error}${m.allowed ? ` (allowed modes: ${m.allowed.join(", ")})` : ""}`, "error");
+      if (m.control) document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
+    }
   };
-  socket.onclose = () => { socket = null; setTimeout(connect, 1000); };
+  socket.onclose = (ev) => {
+    socket = null;
+    state.driving = false;
+    if (ev.code === 1008) { message(`teleop closed: ${ev.reason || "sign in again"}`, "error"); return; }
+    setTimeout(connect, 1000);
+  };
 }
 
-function currentTwist() {
+/** Send a control message on the teleop socket ({type: "take_control"} etc.); false if not connected. */
+export function sendControl(msg) {
+  if (!socket || socket.readyState !== WebSocket.OPEN) return false;
+  socket.send(JSON.stringify(msg));
+  return true;
+}
+
+function fromKeys(set) {
   let vx = 0, vy = 0, wz = 0;
-  for (const k of keys) {
+  for (const k of set) {
     const m = KEYMAP[k];
     if (m) { vx += m[0]; vy += m[1]; wz += m[2]; }
   }
+  return { vx: Math.sign(vx), vy: Math.sign(vy), wz: Math.sign(wz) };
+}
+
+/** Set (or clear with null) one input source's normalised command and send the result now. */
+export function setSource(name, cmd) {
+  if (cmd && (cmd.vx || cmd.vy || cmd.wz)) sources.set(name, cmd);
+  else sources.delete(name);
+  send();
+}
+
+function currentTwist() {
+  const name = PRIORITY.find((n) => sources.has(n));
+  const c = name ? sources.get(name) : { vx: 0, vy: 0, wz: 0 };
   const lim = state.limits || { max_vel_x: 0.26, max_vel_y: 0, max_vel_theta: 1.0 };
-  const scale = Number($("#speed-scale").value) * (slowHeld ? 0.3 : 1);
+  const scale = Number($("#speed-scale").value) * (slowHeld ? SLOW : 1);
+  const vy = state.omni ? (lim.max_vel_y || lim.max_vel_x) : 0;
   return {
-    linear: { x: Math.sign(vx) * lim.max_vel_x * scale, y: Math.sign(vy) * (lim.max_vel_y || 0) * scale, z: 0 },
-    angular: { x: 0, y: 0, z: Math.sign(wz) * lim.max_vel_theta * scale },
+    linear: { x: c.vx * lim.max_vel_x * scale, y: c.vy * vy * scale, z: 0 },
+    angular: { x: 0, y: 0, z: c.wz * lim.max_vel_theta * scale },
   };
 }
 
@@ -42,58 +85,74 @@ export function sendTwist(twist) {
   socket.send(JSON.stringify(twist));
 }
 
-function sendKeys() {
+function send() {
   const twist = currentTwist();
   const zero = twist.linear.x === 0 && twist.linear.y === 0 && twist.angular.z === 0;
-  if (zero && lastSentZero) return; // nothing held: the server's deadman stops the robot
+  if (zero && lastSentZero) return;
   sendTwist(twist);
   lastSentZero = zero;
 }
 
-function stop() {
+export function stop() {
   keys.clear();
+  padKeys.clear();
+  sources.clear();
   sendTwist({ linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } });
   lastSentZero = true;
 }
 
 const keyName = (ev) => ev.key.toLowerCase();
+const typing = (ev) => ev.target && ["INPUT", "TEXTAREA", "SELECT"].includes(ev.target.tagName) && ev.target.type !== "range";
 
 function onKeyDown(ev) {
-  if (ev.target && (ev.target.tagName === "INPUT" || ev.target.tagName === "TEXTAREA")) return;
+  if (typing(ev)) return;
   const k = keyName(ev);
+  if (k === "shift") { slowHeld = true; send(); return; }
   slowHeld = ev.shiftKey;
-  if (k === "escape") { estop(); ev.preventDefault(); return; }
+  if (k === "escape") { stop(); estop(); ev.preventDefault(); return; }
   if (k === " ") { stop(); ev.preventDefault(); return; }
-  if (KEYMAP[k]) { keys.add(k); sendKeys(); ev.preventDefault(); }
+  if (KEYMAP[k]) {
+    if (!ev.repeat) perf.keyDownAt.push(performance.timeOrigin + performance.now());
+    keys.add(k);
+    setSource("keys", fromKeys(keys));
+    ev.preventDefault();
+  }
 }
 
 function onKeyUp(ev) {
-  slowHeld = ev.shiftKey;
-  keys.delete(keyName(ev));
-  sendKeys();
+  const k = keyName(ev);
+  slowHeld = k === "shift" ? false : ev.shiftKey;
+  keys.delete(k);
+  setSource("keys", fromKeys(keys));
 }
 
 export function attachKeys(target) {
   target.addEventListener("keydown", onKeyDown);
   target.addEventListener("keyup", onKeyUp);
-  target.addEventListener("blur", stop);
+  target.addEventListener("blur", () => { keys.clear(); setSource("keys", null); });
 }
 
 export function init() {
   for (const b of document.querySelectorAll(".teleop-pad .key")) {
     const k = b.dataset.key;
-    const down = (ev) => { ev.preventDefault(); if (k === " ") stop(); else { keys.add(k); sendKeys(); } };
-    const up = () => { keys.delete(k); sendKeys(); };
+    const down = (ev) => {
+      ev.preventDefault();
+      if (k === " ") { stop(); return; }
+      b.setPointerCapture?.(ev.pointerId);
+      padKeys.add(k);
+      setSource("pad", fromKeys(padKeys));
+    };
+    const up = () => { padKeys.delete(k); setSource("pad", fromKeys(padKeys)); };
     b.addEventListener("pointerdown", down);
     b.addEventListener("pointerup", up);
-    b.addEventListener("pointerleave", up);
     b.addEventListener("pointercancel", up);
+    b.addEventListener("lostpointercapture", up);
   }
   $("#speed-scale").addEventListener("input", (ev) => { $("#speed-out").textContent = `${Math.round(ev.target.value * 100)}%`; });
   attachKeys(window);
   const frame = $("#viewer");
   // The 3D view is same-origin: listen to its keys too, so driving works after clicking into it.
   frame.addEventListener("load", () => { try { attachKeys(frame.contentWindow); } catch { /* cross-origin */ } });
-  setInterval(() => { if (keys.size) sendKeys(); }, 100); // keep the deadman fed while keys are held
+  setInterval(() => { if (sources.size) { lastSentZero = false; send(); } }, 100); // feed the deadman
   connect();
 }

@@ -8,12 +8,15 @@ import json
 import math
 import time
 import uuid
+from dataclasses import replace
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
+from app.auth import Principal, Role
 from app.modes import Mode, TransitionRefused
 from app.runtime import Runtime
+from app.security import principal_of
 from app.telemetry import snapshot_dict
 from nav.types import Twist2D
 
@@ -56,17 +59,64 @@ async def _send(ws: WebSocket, payload: dict) -> None:
         await ws.send_text(json.dumps(payload))
 
 
+CLOSE_POLICY = 1008  # RFC 6455: policy violation (signed out, session expired)
+
+
+def _principal(ws: WebSocket) -> Principal:
+    """The caller resolved by app.security's middleware; cookie-less clients are told apart per socket
+    (``addr:<ip>#<n>``) so two scripts on one machine are still two clients."""
+    p = principal_of(ws.scope) or Principal(client_id="addr:local", role=Role.OPERATOR)
+    if p.client_id.startswith("addr:"):
+        p = replace(p, client_id=f"{p.client_id}#{uuid.uuid4().hex[:8]}")
+    return p
+
+
+async def _expiry_watch(ws: WebSocket, p: Principal, on_expired) -> None:
+    """Close the socket with a reason when its sign-in session expires or is ended (re-checked every
+    few seconds, so a sign-out elsewhere also closes it)."""
+    if p.token_hash is None:
+        return
+    store = ws.app.state.auth.store
+    while True:
+        left = (p.expires_at or math.inf) - time.time()
+        await asyncio.sleep(max(0.05, min(left, 5.0)))
+        valid = not p.expired() and await asyncio.to_thread(store.still_valid, p.token_hash)
+        if not valid:
+            on_expired()
+            with contextlib.suppress(RuntimeError, WebSocketDisconnect):
+                await ws.close(CLOSE_POLICY, "session expired: sign in again")
+            return
+
+
 @router.websocket("/ws/teleop")
 async def teleop(ws: WebSocket) -> None:
     rt: Runtime = ws.app.state.runtime
+    guard = ws.app.state.guard
     session = rt.session
     await ws.accept()
-    client_id = f"teleop-{uuid.uuid4().hex[:8]}"
-    name = ws.query_params.get("name", client_id)[:64]
-    have_lease = rt.lease.acquire(client_id, name)
+    p = _principal(ws)
+    client_id = p.client_id
+    name = p.username or (ws.query_params.get("name") or p.display)[:64]
+    p = replace(p, username=p.username or name)
+    guard.attach(client_id)
+    have_lease = p.can_drive and (guard.holds(p) or guard.acquire(p))
     await _send(
-        ws, {"type": "hello", "client_id": client_id, "control": rt.lease.as_dict(), "driving": have_lease}
+        ws,
+        {
+            "type": "hello",
+            "client_id": client_id,
+            "name": p.display,
+            "role": p.role.value,
+            "control": guard.as_dict(),
+            "driving": have_lease,
+        },
     )
+
+    def expired() -> None:
+        if guard.holds(p):
+            guard.free(client_id, "session expired")
+
+    watch = asyncio.create_task(_expiry_watch(ws, p, expired))
     try:
         while True:
             message = await ws.receive()
@@ -75,6 +125,10 @@ async def teleop(ws: WebSocket) -> None:
             text = message.get("text")
             if text is None:
                 await ws.close(UNSUPPORTED_DATA, "teleop takes JSON text frames")
+                break
+            if p.expired():
+                expired()
+                await ws.close(CLOSE_POLICY, "session expired: sign in again")
                 break
             if len(text) > MAX_TELEOP_FRAME:
                 session.stop_teleop(client_id)
@@ -86,10 +140,16 @@ async def teleop(ws: WebSocket) -> None:
                 session.stop_teleop(client_id)
                 await ws.close(UNSUPPORTED_DATA, "not JSON")
                 break
-            if isinstance(data, dict) and data.get("type") == "take_control":
-                have_lease = rt.lease.acquire(client_id, name, take_over=True)
-                session.stop_teleop()
-                await _send(ws, {"type": "control", "driving": have_lease, "control": rt.lease.as_dict()})
+            kind = data.get("type") if isinstance(data, dict) else None
+            if kind in ("take_control", "release_control"):
+                if not p.can_drive:
+                    await _send(ws, {"type": "error", "error": "viewers cannot drive", "status": 403})
+                    continue
+                if kind == "take_control":
+                    guard.acquire(p, take_over=True)
+                else:
+                    guard.release(p)
+                await _send(ws, {"type": "control", "driving": guard.holds(p), "control": guard.as_dict()})
                 continue
             try:
                 cmd = parse_twist(data)
@@ -97,9 +157,20 @@ async def teleop(ws: WebSocket) -> None:
                 session.stop_teleop(client_id)
                 await _send(ws, {"type": "error", "error": str(exc)})
                 continue
-            if not rt.lease.holds(client_id):
+            if not p.can_drive:
                 await _send(
-                    ws, {"type": "error", "error": "another client is driving", "control": rt.lease.as_dict()}
+                    ws,
+                    {
+                        "type": "error",
+                        "error": f"{p.display} is a viewer: viewers cannot drive",
+                        "status": 403,
+                    },
+                )
+                continue
+            guard.touch(client_id)
+            if not guard.holds(p):
+                await _send(
+                    ws, {"type": "error", "error": "another client is driving", "control": guard.as_dict()}
                 )
                 continue
             mode = session.modes.mode
@@ -122,9 +193,10 @@ async def teleop(ws: WebSocket) -> None:
     except WebSocketDisconnect:
         pass
     finally:
-        if rt.lease.holds(client_id):
+        watch.cancel()
+        if guard.holds(p):
             session.stop_teleop(client_id)
-            rt.lease.release(client_id)
+        guard.detach(client_id)
 
 
 @router.websocket("/ws/telemetry")
@@ -138,6 +210,8 @@ async def telemetry(ws: WebSocket) -> None:
     period = 1.0 / min(max(hz, 1.0), 20.0)
     include_scan = ws.query_params.get("scan", "1") != "0"
     sub = rt.session.bus.subscribe(asyncio.get_running_loop())
+    guard = ws.app.state.guard
+    watch = asyncio.create_task(_expiry_watch(ws, _principal(ws), lambda: None))
 
     async def drain_incoming() -> None:  # we only listen to notice the disconnect
         while True:
@@ -163,7 +237,7 @@ async def telemetry(ws: WebSocket) -> None:
             payload = snapshot_dict(
                 snap, rt.profile.name, include_scan=include_scan, allowed_modes=rt.session.modes.allowed()
             )
-            payload["control"] = rt.lease.as_dict()
+            payload["control"] = guard.as_dict()
             # a client that cannot take a frame within 2 s is dropped, never waited on by the loop
             await asyncio.wait_for(ws.send_text(json.dumps(payload)), timeout=2.0)
     except (WebSocketDisconnect, TimeoutError, RuntimeError):
@@ -171,6 +245,7 @@ async def telemetry(ws: WebSocket) -> None:
     finally:
         sub.close()
         reader.cancel()
+        watch.cancel()
         if ws.client_state == WebSocketState.CONNECTED:
             with contextlib.suppress(Exception):
                 await ws.close()

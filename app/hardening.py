@@ -1,0 +1,190 @@
+"""Hostile-input hardening for every request: body size limits, browser security headers, and the
+Origin check on websocket upgrades (issue 9 part 5; docs/reliability.md).
+
+One outermost ASGI middleware, so it also covers responses produced by other middlewares (a 401 from
+app.security) and routes added later by other modules.
+
+- Size limits (OWASP ASVS 13.1): a request body larger than its limit is refused with 413 before the
+  route reads it (``Content-Length``) or as soon as the streamed body passes it (chunked uploads).
+  ``multipart/form-data`` (map and run uploads) gets ``max_upload_bytes``; everything else (JSON
+  commands) gets ``max_body_bytes``.
+- Headers (OWASP Secure Headers Project): ``X-Content-Type-Options: nosniff``, ``X-Frame-Options:
+  SAMEORIGIN`` (the dashboard frames its own 3D view), ``Referrer-Policy: same-origin`` and a
+  Content-Security-Policy. The dashboard's own pages load only same-origin scripts; viser's client page
+  is one HTML file whose bundle is inlined and unpacked at run time (inline script, eval, blob and
+  wasm workers), so ``/viz/`` pages get a policy that allows exactly that but still only from 'self';
+  FastAPI's /docs and /redoc load Swagger UI / ReDoc from jsDelivr.
+- Websockets (RFC 6455 section 10.2): browsers always send ``Origin`` on an upgrade and a page on
+  another site could otherwise drive the robot with the operator's cookies (cross-site websocket
+  hijacking). An upgrade whose Origin is not this server's own Host (or listed in
+  ``NAVDECK_ALLOWED_ORIGINS``) is refused with 403. Clients that send no Origin (scripts, the load tool)
+  are not browsers and are left to sign-in.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Awaitable, Callable, Iterable
+from typing import Any
+from urllib.parse import urlsplit
+
+from starlette.exceptions import HTTPException
+
+Scope = dict[str, Any]
+Message = dict[str, Any]
+Receive = Callable[[], Awaitable[Message]]
+Send = Callable[[Message], Awaitable[None]]
+ASGIApp = Callable[[Scope, Receive, Send], Awaitable[None]]
+
+MAX_BODY_BYTES = 1 << 20  # JSON commands and forms: a goal is ~100 bytes
+CLOSE_POLICY = 1008
+
+DASHBOARD_CSP = (
+    "default-src 'self'; script-src 'self'; style-src 'self' 'unsafe-inline'; "
+    "img-src 'self' data: blob:; font-src 'self' data:; connect-src 'self' ws: wss:; "
+    "frame-src 'self'; frame-ancestors 'self'; object-src 'none'; base-uri 'self'; form-action 'self'"
+)
+VIZ_CSP = (
+    "default-src 'self'; script-src 'self' 'unsafe-inline' 'unsafe-eval' 'wasm-unsafe-eval' blob: data:; "
+    "worker-src 'self' blob: data:; style-src 'self' 'unsafe-inline'; img-src 'self' data: blob:; "
+    "font-src 'self' data:; connect-src 'self' ws: wss: blob: data:; frame-ancestors 'self'; "
+    "object-src 'none'; base-uri 'self'"
+)
+DOCS_CSP = (
+    "default-src 'self'; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; "
+    "style-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; "
+    "font-src 'self' https://fonts.gstatic.com; img-src 'self' data: https://fastapi.tiangolo.com "
+    "https://cdn.redoc.ly; worker-src 'self' blob:; connect-src 'self'; frame-ancestors 'self'; "
+    "object-src 'none'; base-uri 'self'"
+)
+COMMON_HEADERS: tuple[tuple[bytes, bytes], ...] = (
+    (b"x-content-type-options", b"nosniff"),
+    (b"x-frame-options", b"SAMEORIGIN"),
+    (b"referrer-policy", b"same-origin"),
+    (b"cross-origin-opener-policy", b"same-origin"),
+)
+
+
+def csp_for(path: str) -> str:
+    """The Content-Security-Policy for one path (see the module docstring for why they differ)."""
+    if path.endswith("/viz") or "/viz/" in path:
+        return VIZ_CSP
+    if path in ("/docs", "/redoc") or path.startswith("/docs/"):
+        return DOCS_CSP
+    return DASHBOARD_CSP
+
+
+def allowed_origins_from_env() -> frozenset[str]:
+    """``NAVDECK_ALLOWED_ORIGINS``: comma-separated origins (``https://ops.example.com``) also allowed."""
+    raw = os.environ.get("NAVDECK_ALLOWED_ORIGINS", "")
+    return frozenset(o.strip().rstrip("/").lower() for o in raw.split(",") if o.strip())
+
+
+def _header(scope: Scope, name: bytes) -> str | None:
+    for k, v in scope.get("headers", ()):
+        if k == name:
+            return v.decode("latin-1")
+    return None
+
+
+def origin_allowed(origin: str | None, host: str | None, extra: Iterable[str] = ()) -> bool:
+    """True if a websocket upgrade with this ``Origin`` may proceed: none given (not a browser), the
+    same host[:port] as the request's ``Host`` (any scheme: TLS may end at a proxy), or listed."""
+    if origin is None:
+        return True
+    origin = origin.strip().rstrip("/").lower()
+    if origin in set(extra):
+        return True
+    if origin == "null" or not host:
+        return False
+    netloc = urlsplit(origin).netloc
+    return bool(netloc) and netloc == host.strip().lower()
+
+
+class RequestTooLarge(HTTPException):
+    """The streamed request body passed its limit. An HTTPException so that FastAPI's body parsing
+    re-raises it as is (it turns other errors into 400) and the app answers 413."""
+
+    def __init__(self, limit: int) -> None:
+        super().__init__(413, f"request body larger than {limit} bytes")
+
+
+class HardeningMiddleware:
+    def __init__(
+        self,
+        app: ASGIApp,
+        *,
+        max_upload_bytes: int,
+        max_body_bytes: int = MAX_BODY_BYTES,
+        allowed_origins: Iterable[str] | None = None,
+    ) -> None:
+        self.app = app
+        self.max_upload_bytes = max_upload_bytes
+        self.max_body_bytes = max_body_bytes
+        self.allowed_origins = (
+            allowed_origins_from_env() if allowed_origins is None else frozenset(allowed_origins)
+        )
+
+    def limit_for(self, scope: Scope) -> int:
+        ctype = (_header(scope, b"content-type") or "").lower()
+        return self.max_upload_bytes if ctype.startswith("multipart/form-data") else self.max_body_bytes
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] == "websocket":
+            if not origin_allowed(_header(scope, b"origin"), _header(scope, b"host"), self.allowed_origins):
+                await receive()  # websocket.connect; closing before accept answers the upgrade with 403
+                await send({"type": "websocket.close", "code": CLOSE_POLICY, "reason": "origin not allowed"})
+                return
+            await self.app(scope, receive, send)
+            return
+        if scope["type"] != "http":
+            await self.app(scope, receive, send)
+            return
+
+        limit = self.limit_for(scope)
+        length = _header(scope, b"content-length")
+        if length is not None and (not length.strip().isdigit() or int(length) > limit):
+            await _reject(send, 413, f"request body larger than {limit} bytes")
+            return
+        extra = (*COMMON_HEADERS, (b"content-security-policy", csp_for(scope.get("path", "/")).encode()))
+        seen = 0
+        started = False
+
+        async def limited_receive() -> Message:
+            nonlocal seen
+            msg = await receive()
+            if msg["type"] == "http.request":
+                seen += len(msg.get("body", b""))
+                if seen > limit:
+                    raise RequestTooLarge(limit)
+            return msg
+
+        async def send_with_headers(msg: Message) -> None:
+            nonlocal started
+            if msg["type"] == "http.response.start":
+                started = True
+                present = {k.lower() for k, _ in msg.get("headers", ())}
+                added = [h for h in extra if h[0] not in present]
+                msg = {**msg, "headers": [*msg.get("headers", ()), *added]}
+            await send(msg)
+
+        try:
+            await self.app(scope, limited_receive, send_with_headers)
+        except RequestTooLarge:
+            if started:
+                raise
+            await _reject(send_with_headers, 413, f"request body larger than {limit} bytes")
+
+
+async def _reject(send: Send, status: int, detail: str) -> None:
+    import json
+
+    body = json.dumps({"detail": detail}).encode()
+    headers = [
+        (b"content-type", b"application/json"),
+        (b"content-length", str(len(body)).encode()),
+        (b"connection", b"close"),
+        *COMMON_HEADERS,
+    ]
+    await send({"type": "http.response.start", "status": status, "headers": headers})
+    await send({"type": "http.response.body", "body": body})

@@ -1,0 +1,60 @@
+// Goals and waypoints: the navigator's queue (from telemetry) and a draft list sent as waypoints.
+import { $, api, fmt, message, onTelemetry, state } from "./core.js";
+
+const draft = [];
+const pose = (g) => `x ${fmt(g.x)}  y ${fmt(g.y)}  θ ${fmt((g.theta * 180) / Math.PI, 0)}°`;
+
+function renderDraft() {
+  const list = $("#draft-list");
+  list.replaceChildren(...draft.map((g, i) => {
+    const li = document.createElement("li");
+    li.textContent = pose(g);
+    const rm = document.createElement("button");
+    rm.className = "btn small";
+    rm.textContent = "✕";
+    rm.setAttribute("aria-label", `remove waypoint ${i + 1}`);
+    rm.addEventListener("click", () => { draft.splice(i, 1); renderDraft(); });
+    li.appendChild(rm);
+    return li;
+  }));
+  $("#goals-send").disabled = draft.length === 0 || !!(state.me && !state.me.can_drive);
+}
+
+let lastKey = "";
+function renderQueue(t) {
+  const nav = t.navigation;
+  const goals = nav && nav.active ? nav.goals || [] : [];
+  const idx = nav ? nav.goal_index || 0 : 0;
+  const key = JSON.stringify([goals, idx]);
+  if (key === lastKey) return;
+  lastKey = key;
+  $("#goal-list").replaceChildren(...goals.map((g, i) => {
+    const li = document.createElement("li");
+    li.textContent = pose(g);
+    li.className = i < idx ? "done" : i === idx ? "current" : "";
+    return li;
+  }));
+}
+
+export function init() {
+  onTelemetry(renderQueue);
+  $("#goal-form").addEventListener("submit", (ev) => {
+    ev.preventDefault();
+    const f = ev.target;
+    const g = { x: Number(f.x.value), y: Number(f.y.value), theta: (Number(f.theta.value || 0) * Math.PI) / 180 };
+    if (![g.x, g.y, g.theta].every(Number.isFinite)) { message("a waypoint needs numbers for x, y and θ", "error"); return; }
+    draft.push(g);
+    renderDraft();
+  });
+  $("#goals-clear").addEventListener("click", () => { draft.length = 0; renderDraft(); });
+  $("#goals-send").addEventListener("click", async () => {
+    if (!draft.length) return;
+    try {
+      await api("POST", "/api/navigation/goals", draft.length === 1 ? draft[0] : draft);
+      message(`navigating through ${draft.length} waypoint${draft.length > 1 ? "s" : ""}`, "ok");
+      draft.length = 0;
+      renderDraft();
+    } catch { /* the refusal (409/422 with its reason) is in Messages */ }
+  });
+  renderDraft();
+}
