@@ -27,4 +27,5 @@ if [ ${#need_apt[@]} -gt 0 ]; then
 fi
 
 .venv/bin/ruff check .
-exec .venv/bin/pytest "$@"
+# Two workers (the CI machine has 2 cores); tests of one file stay on one worker (shared fixtures).
+exec .venv/bin/pytest -n "${NAVDECK_TEST_WORKERS:-2}" --dist loadfile "$@"
