@@ -303,6 +303,12 @@ class Session:
         fault = frame.fault or self._fault_condition(now)
         if fault is not None and self.fault is None:
             self._enter_fault(fault)
+        elif fault is not None and fault != self.fault and self.modes.mode == Mode.FAULT:
+            # the cause changed while faulted (e.g. a port came back reporting a health error): show the
+            # present cause, which is what blocks a reset
+            with self._lock:
+                self.fault = fault
+            self.modes.reason = fault
 
     def _choose_command(self, now: float) -> Twist2D | None:
         """The command for this tick before limits; None means stop now (no ramp)."""

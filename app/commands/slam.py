@@ -31,8 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 class ProgressBar:
     """Plain-text progress on stderr: bar, done/total, rate and ETA; redrawn at most 5x a second."""
 
-    def __init__(self, stream=sys.stderr, width: int = 30) -> None:
-        self.stream = stream
+    def __init__(self, stream=None, width: int = 30) -> None:
+        self.stream = stream if stream is not None else sys.stderr  # resolved now, not at import
         self.width = width
         self.start = time.monotonic()
         self.last = 0.0
