@@ -248,3 +248,31 @@ def test_busy_port_exits_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureF
         port.close()
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "busy" in err and port.path in err, err
+
+
+def test_maps_over_the_hardware_path(pair: EmulatorPair, server: EmbeddedServer) -> None:
+    """Mapping is driver-agnostic: scans from the emulated RPLidar and odometry from the serial encoder
+    counts build and save a map, like with ``--robot sim``."""
+    rt = server.runtime
+    with httpx.Client(base_url=server.url, timeout=20) as api:
+        r = api.post("/api/mapping/start")
+        assert r.status_code == 200, r.text
+        with connect(f"{server.ws_url}/ws/teleop") as ws:
+            hello(ws)
+            ws.send(json.dumps({"type": "take_control"}))
+            assert json.loads(ws.recv(timeout=10))["driving"]
+            drive(ws, 3.0, vx=0.2)
+            drive(ws, 1.5, wz=0.8)
+            drive(ws, 2.0, vx=0.2)
+        assert pair.pump.truth_pose.distance_to(Pose2D()) > 0 and rt.session.fault is None, rt.session.fault
+        state = api.get("/api/mapping").json()
+        r = api.post("/api/mapping/stop")
+        assert r.status_code == 200, r.text
+        r = api.post("/api/mapping/save", json={"name": "serial-map"})
+        assert r.status_code == 201, r.text
+        saved = r.json()
+        grid = rt.maps.grid(saved["id"])
+    assert grid is not None
+    known = (grid.data >= 0).sum() * grid.resolution**2
+    occupied = (grid.data >= 65).sum()
+    assert known > 2.0 and occupied > 50, (known, occupied, state)

@@ -1,0 +1,283 @@
+"""``navdeck sim-nav``: drive the simulated robot to a goal with the whole stack, as fast as possible.
+
+The same ``Session`` and the same localization and navigation features as the server (no HTTP), on
+a ``VirtualClock`` that the loop advances one control period at a time: deterministic for a seed and
+limited only by the CPU. Prints ``{"reached", "time_s", "path_length_m", "recoveries", "collisions",
+"min_clearance_m", "localization_error_m"}`` (``--json``) or a one-line summary.
+
+``run_sim_nav`` is the library entry point used by the scenario suite (``bench/scenarios``).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from app.cli import CliError
+
+if TYPE_CHECKING:
+    from app.features.localization import Localization
+    from app.features.navigation import Navigation
+    from app.session import Session
+    from nav.types import OccupancyGrid, Pose2D
+    from robot.sim import SimDriver, World
+
+
+def _pose_arg(text: str) -> tuple[float, float, float]:
+    try:
+        values = [float(p) for p in text.split(",")]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected x,y,theta in metres/radians, got {text!r}") from None
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"expected x,y[,theta] with finite numbers, got {text!r}")
+    return values[0], values[1], values[2] if len(values) == 3 else 0.0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser(
+        "sim-nav", help="simulate navigating to a goal (AMCL + costmaps + planner + DWA) on a virtual clock"
+    )
+    p.add_argument("--map", required=True, help="map YAML the robot localizes and plans in")
+    p.add_argument("--world", help="world YAML the simulator runs (default: the map)")
+    p.add_argument("--profile", default="skid4", help="robot profile name or TOML path (default skid4)")
+    p.add_argument("--start", required=True, type=_pose_arg, help="start x,y,theta in the map frame")
+    p.add_argument(
+        "--goal", required=True, type=_pose_arg, action="append", help="goal x,y,theta (repeat: waypoints)"
+    )
+    p.add_argument("--controller", choices=["dwa"], default="dwa")
+    p.add_argument("--planner", choices=["astar", "dijkstra"], default="astar")
+    p.add_argument("--localization", choices=["amcl", "truth"], default="amcl")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--timeout", type=float, default=120.0, help="simulated seconds before giving up")
+    p.add_argument("--json", action="store_true", help="print one JSON object")
+    p.set_defaults(func=run)
+
+
+@dataclass(frozen=True)
+class SimNavConfig:
+    """One simulated navigation run."""
+
+    map_path: Path
+    start: tuple[float, float, float]
+    goals: tuple[tuple[float, float, float], ...]
+    world_path: Path | None = None
+    profile: str = "skid4"
+    planner: str = "astar"
+    localization: str = "amcl"
+    seed: int = 0
+    timeout: float = 120.0
+    rate_hz: float = 20.0
+    obstacles: tuple[tuple[tuple[float, float], ...], ...] = ()
+    """Polygons added to the simulated world only (unmapped obstacles the lidar must see)."""
+
+
+@dataclass
+class SimNavResult:
+    reached: bool
+    time_s: float
+    path_length_m: float
+    recoveries: int
+    collisions: int
+    min_clearance_m: float
+    localization_error_m: float
+    outcome: str = ""
+    reason: str = ""
+    goals_reached: int = 0
+    localization_error_max_m: float = 0.0
+    wall_s: float = 0.0
+    speedup: float = 0.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def as_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d.pop("extra")
+        for k, v in d.items():
+            if isinstance(v, float):
+                d[k] = round(v, 4) if math.isfinite(v) else None
+        return d
+
+
+@dataclass
+class SimStack:
+    """A simulated robot with the server's session and features, on a virtual clock."""
+
+    session: Session
+    driver: SimDriver
+    world: World
+    localization: Localization
+    navigation: Navigation
+
+
+def build_sim_stack(
+    grid: OccupancyGrid,
+    world: World,
+    start: Pose2D,
+    *,
+    profile: str = "skid4",
+    planner: str = "astar",
+    localization: str = "amcl",
+    seed: int = 0,
+    rate_hz: float = 20.0,
+) -> SimStack:
+    """Session + SimDriver + localization and navigation features, as ``Runtime.start`` wires them."""
+    from app.features.localization import Localization, LocalizationOptions
+    from app.features.navigation import Navigation, NavigationOptions
+    from app.session import Session, SessionOptions
+    from robot.clock import VirtualClock
+    from robot.profiles import load_profile
+    from robot.sim import SimDriver
+
+    prof = load_profile(profile)
+    clock = VirtualClock()
+    driver = SimDriver(world, prof, clock, seed=seed, start_pose=start)
+    session = Session(
+        driver, clock=clock, grid=grid, start_pose=start, options=SessionOptions(rate_hz=rate_hz)
+    )
+    loc = Localization(session, LocalizationOptions(source=localization), seed=seed)  # type: ignore[arg-type]
+    session.add_stage(loc)
+    nav = Navigation(session, loc, NavigationOptions(planner=planner))  # type: ignore[arg-type]
+    session.add_stage(nav)
+    return SimStack(session, driver, world, loc, nav)
+
+
+def _outline(polygon, spacing: float = 0.02):
+    import numpy as np
+
+    poly = np.asarray(polygon, dtype=float)
+    nxt = np.roll(poly, -1, axis=0)
+    pts = []
+    for a, b in zip(poly, nxt, strict=True):
+        n = max(1, math.ceil(float(np.hypot(*(b - a))) / spacing))
+        t = np.arange(n)[:, None] / n
+        pts.append(a + t * (b - a))
+    return np.vstack(pts)
+
+
+def drive(stack: SimStack, goals: Sequence[Pose2D], timeout: float) -> SimNavResult:
+    """Send ``goals`` and step the loop until the navigation outcome or ``timeout`` simulated s."""
+    import numpy as np
+
+    s, nav, world = stack.session, stack.navigation, stack.world
+    geo = world.geometry
+    clear = world.clearance_map
+    outline = _outline(stack.driver.profile.footprint_polygon())
+    nav.set_goals(list(goals))
+    t0, wall0 = s.clock.now(), time.perf_counter()
+    min_clear, errs = math.inf, []
+    last = stack.driver.truth_pose
+    length = 0.0
+    outcome = None
+    collisions0 = s.collisions
+    while s.clock.now() - t0 < timeout:
+        s.clock.sleep_until(s.clock.now() + s.period)
+        s.step()
+        truth = stack.driver.truth_pose
+        length += last.distance_to(truth)
+        last = truth
+        rows, cols = geo.world_to_cell(truth.transform_points(outline))
+        rows = np.clip(rows, 0, geo.height - 1)
+        cols = np.clip(cols, 0, geo.width - 1)
+        # cell-centre distance minus half a cell: distance to the obstacle cell's edge
+        min_clear = min(min_clear, float(clear[rows, cols].min()) - 0.5 * geo.resolution)
+        errs.append(s.pose.distance_to(truth))
+        if nav.last_outcome is not None and not nav.active:
+            outcome = nav.last_outcome
+            break
+    sim_t = s.clock.now() - t0
+    wall = time.perf_counter() - wall0
+    e = np.asarray(errs) if errs else np.zeros(1)
+    return SimNavResult(
+        reached=outcome is not None and outcome["kind"] == "reached",
+        time_s=sim_t,
+        path_length_m=length,
+        recoveries=nav.recoveries,
+        collisions=s.collisions - collisions0,
+        min_clearance_m=max(0.0, min_clear),
+        localization_error_m=float(np.sqrt(np.mean(e**2))),
+        outcome="timeout" if outcome is None else outcome["kind"],
+        reason="" if outcome is None else outcome["reason"],
+        goals_reached=0 if outcome is None else outcome["goals_reached"],
+        localization_error_max_m=float(e.max()),
+        wall_s=wall,
+        speedup=sim_t / wall if wall > 0 else math.inf,
+    )
+
+
+def run_sim_nav(cfg: SimNavConfig) -> SimNavResult:
+    """Load the map and world, build the stack, set the initial pose, navigate; typed errors from
+    the features (``GoalRejected``, ``LocalizationRequestError``) propagate."""
+    from maps.mapio import load_map_yaml
+    from nav.types import Pose2D
+    from robot.sim import World
+
+    grid = load_map_yaml(cfg.map_path)
+    world = World.from_yaml(cfg.world_path or cfg.map_path)
+    for poly in cfg.obstacles:
+        world.add_polygon(list(poly))
+    start = Pose2D(*cfg.start)
+    stack = build_sim_stack(
+        grid,
+        world,
+        start,
+        profile=cfg.profile,
+        planner=cfg.planner,
+        localization=cfg.localization,
+        seed=cfg.seed,
+        rate_hz=cfg.rate_hz,
+    )
+    try:
+        stack.localization.set_initial_pose(start)
+        return drive(stack, [Pose2D(*g) for g in cfg.goals], cfg.timeout)
+    finally:
+        stack.session.close()
+
+
+def run(args: argparse.Namespace) -> int:
+    from app.features.localization import LocalizationRequestError
+    from app.features.navigation import GoalRejected, NavigationRefused
+    from maps.mapio import MapFormatError
+    from robot.profiles import ProfileError
+
+    map_path = Path(args.map)
+    if not map_path.is_file():
+        raise CliError(f"map file not found: {map_path}")
+    world_path = Path(args.world) if args.world else None
+    if world_path is not None and not world_path.is_file():
+        raise CliError(f"world file not found: {world_path}")
+    if not math.isfinite(args.timeout) or args.timeout <= 0:
+        raise CliError("--timeout must be a positive number of seconds")
+    cfg = SimNavConfig(
+        map_path=map_path,
+        world_path=world_path,
+        profile=args.profile,
+        start=args.start,
+        goals=tuple(args.goal),
+        planner=args.planner,
+        localization=args.localization,
+        seed=args.seed,
+        timeout=args.timeout,
+    )
+    try:
+        result = run_sim_nav(cfg)
+    except (LocalizationRequestError, GoalRejected, NavigationRefused) as exc:
+        raise CliError(str(exc)) from None
+    except (MapFormatError, ProfileError, OSError, ValueError) as exc:
+        raise CliError(f"cannot run: {exc}") from None
+    d = result.as_dict()
+    if args.json:
+        print(json.dumps(d))
+    else:
+        status = "reached" if result.reached else f"not reached ({result.outcome} {result.reason})".strip()
+        print(
+            f"{status} in {result.time_s:.1f} s simulated ({result.speedup:.0f}x real time), "
+            f"{result.path_length_m:.2f} m driven, {result.collisions} collisions, "
+            f"min clearance {result.min_clearance_m:.3f} m, "
+            f"localization RMS {result.localization_error_m:.3f} m"
+        )
+    return 0

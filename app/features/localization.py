@@ -1,0 +1,355 @@
+"""Feature: the active map and AMCL localization on it (Nav2 ``amcl`` + Rviz2's "2D Pose Estimate").
+
+The *active map* is the grid the robot localizes and plans in: the simulated world's grid at start,
+switched by the maps API through :meth:`Localization.set_map` (AMCL restarts, listeners such as the
+navigation feature rebuild their global costmap).
+
+Each tick the stage runs AMCL on a new scan (gated by Nav2's ``update_min_d`` / ``update_min_a``),
+publishes ``session.map_to_odom`` (REP-105) and the particles, and keeps a *localized* flag that
+guards NAVIGATING. Like Nav2 the filter does nothing until it has an initial pose (API, a click in
+the 3D view) or is asked to localize globally. Global localization follows source A rather than Nav2:
+the robot rotates in place (mode LOCALIZING, a command source) until the particle cloud has
+converged and the scan fits the map, then returns to IDLE.
+
+Requests arrive on other threads (uvicorn, viser); they are validated at once against the immutable
+grid and applied by the control loop at its next tick, so AMCL is only ever touched by one thread.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Callable
+from concurrent.futures import Future
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any, Literal
+
+import numpy as np
+
+from app.modes import Mode
+from nav.types import OccupancyGrid, Pose2D, Twist2D
+
+if TYPE_CHECKING:
+    from app.runtime import Runtime
+    from app.session import Session
+    from nav.localization import Amcl, AmclOptions
+    from robot.base import SensorFrame
+
+ORDER = 20
+log = logging.getLogger("navdeck.localization")
+
+MapListener = Callable[[OccupancyGrid, "int | None"], None]
+
+
+class LocalizationRequestError(ValueError):
+    """A pose request the map refuses (off the map, inside a wall); the message says why (422)."""
+
+
+class NoActiveMapError(LocalizationRequestError):
+    """There is no map to localize in (a serial robot before a map was chosen)."""
+
+
+@dataclass(frozen=True)
+class LocalizationOptions:
+    """Options of the localization stage (AMCL's own live in ``AmclOptions``)."""
+
+    source: Literal["amcl", "truth"] = "amcl"
+    """``amcl``: the particle filter; ``truth``: the simulator's true pose (benchmarks, sim-nav)."""
+    initial_std_xy: float = 0.5
+    """Standard deviation (m) of x and y of an initial pose from the operator (Nav2 amcl
+    ``initial_cov_xx`` = 0.5^2)."""
+    initial_std_yaw: float = math.pi / 12.0
+    """Standard deviation (rad) of the yaw of an initial pose (Nav2 ``initial_cov_aa`` = (pi/12)^2)."""
+    spin_speed: float = 0.6
+    """Angular speed (rad/s) of the in-place rotation during global localization (source A)."""
+    converged_std_xy: float = 0.15
+    """Global localization is done once the estimate's x and y standard deviations are below this (m)..."""
+    converged_std_yaw: float = 0.15
+    """...its yaw standard deviation below this (rad)..."""
+    min_quality: float = 0.5
+    """...the scan fits the map at the estimate at least this well (``Amcl.quality``, 0..1)..."""
+    converged_updates: int = 3
+    """...and all of it held for this many consecutive filter updates."""
+    global_timeout: float = 60.0
+    """Seconds of rotating before global localization gives up (event, back to IDLE)."""
+    occupied_threshold: int = 65
+    """Occupancy (0..100) from which a cell is a wall for pose requests (map_server occupied_thresh)."""
+
+
+class Localization:
+    """The localization stage and the active map. Public methods are thread-safe."""
+
+    def __init__(
+        self,
+        session: Session,
+        options: LocalizationOptions | None = None,
+        amcl_options: AmclOptions | None = None,
+        *,
+        seed: int = 0,
+        map_id: int | None = None,
+    ) -> None:
+        from nav.localization import AmclOptions
+
+        self.session = session
+        self.options = options or LocalizationOptions()
+        robot_model = "omnidirectional" if session.profile.is_omni else "differential"
+        self.amcl_options = amcl_options or AmclOptions(robot_model_type=robot_model)
+        self._seed = seed
+        self._lock = threading.Lock()
+        self._listeners: list[MapListener] = []
+        self.grid: OccupancyGrid | None = session.grid
+        self.map_id = map_id
+        self.map_version = 1 if self.grid is not None else 0
+        self.amcl: Amcl | None = None
+        self._pending: list[tuple[str, Any]] = []
+        self.localized = False
+        self.global_running = False
+        self._global_started = 0.0
+        self._good_updates = 0
+        self._particles: np.ndarray | None = None
+        self._cov = np.zeros((3, 3))
+        self._quality = 0.0
+        self.updates = 0
+        self.resets = 0  # times the estimate was reset (initial pose, global): costmaps clear their marks
+        lid = session.profile.lidar
+        self.laser_pose = Pose2D(lid.mount_x, lid.mount_y, lid.mount_yaw)
+        self._amcl_future: Future | None = None
+        self._prepare(self.grid)
+        session.set_command_source(Mode.LOCALIZING, self._command)
+
+    def _prepare(self, grid: OccupancyGrid | None) -> None:
+        """Build the filter for ``grid`` on a worker: its likelihood field (a distance transform of
+        the whole map) takes long enough to stall a control tick."""
+        from nav.localization import Amcl
+
+        if grid is None or self.options.source == "truth":
+            self._amcl_future = None
+            return
+        opts = replace(self.amcl_options, set_initial_pose=True)
+        self._amcl_future = self.session.workers.submit(Amcl, opts, grid, self._seed)
+
+    # ------------------------------------------------------------------ requests (any thread)
+    def add_map_listener(self, fn: MapListener) -> None:
+        """``fn(grid, map_id)`` runs on the caller's thread whenever the active map changes."""
+        self._listeners.append(fn)
+
+    def set_map(self, grid: OccupancyGrid, map_id: int | None = None) -> None:
+        """Make ``grid`` the active map: AMCL restarts (not localized), the global costmap follows."""
+        with self._lock:
+            self.grid = grid
+            self.map_id = map_id
+            self.map_version += 1
+            self.localized = False
+            self._pending.append(("map", grid))
+            self._prepare(grid)
+        self.session.set_grid(grid)
+        for fn in self._listeners:
+            fn(grid, map_id)
+        self.session.add_event("map", map_id=map_id, reason="active map changed: localization reset")
+
+    def check_pose(self, pose: Pose2D) -> None:
+        """Raise ``LocalizationRequestError`` naming why ``pose`` cannot be the robot's pose."""
+        grid = self.grid
+        if grid is None:
+            raise NoActiveMapError("no active map: choose a map first")
+        if not pose.is_finite():
+            raise LocalizationRequestError("pose must be finite")
+        geo = grid.geometry
+        rows, cols = geo.world_to_cell(np.array([pose.x, pose.y]))
+        if not geo.in_bounds(rows, cols)[0]:
+            w, h = geo.size_m
+            o = geo.origin
+            raise LocalizationRequestError(
+                f"({pose.x:.2f}, {pose.y:.2f}) is off the map "
+                f"(x {o.x:.2f}..{o.x + w:.2f}, y {o.y:.2f}..{o.y + h:.2f})"
+            )
+        value = int(grid.data[rows[0], cols[0]])
+        if value >= self.options.occupied_threshold:
+            raise LocalizationRequestError(f"({pose.x:.2f}, {pose.y:.2f}) is inside a wall")
+
+    def set_initial_pose(self, pose: Pose2D, cov: np.ndarray | None = None) -> None:
+        """Rviz2's "2D Pose Estimate": validate, then reset AMCL around ``pose`` at the next tick.
+        The robot counts as localized at once (the operator vouches for the pose, as in Nav2)."""
+        self.check_pose(pose)
+        if cov is None:
+            o = self.options
+            cov = np.diag([o.initial_std_xy**2, o.initial_std_xy**2, o.initial_std_yaw**2])
+        with self._lock:
+            self._pending.append(("initial_pose", (pose, np.asarray(cov, dtype=float))))
+            self.localized = True
+            self.global_running = False
+        self.session.add_event("initial_pose", pose=[pose.x, pose.y, pose.theta])
+
+    def start_global(self) -> None:
+        """Spread the particles over the free space and rotate in place (mode LOCALIZING) until
+        converged. Raises ``app.modes.TransitionRefused`` when the mode machine says no."""
+        if self.grid is None:
+            raise NoActiveMapError("no active map: choose a map first")
+        if self.options.source == "truth":
+            with self._lock:
+                self.localized = True
+            return
+        self.session.modes.request(Mode.LOCALIZING, "global localization")
+        with self._lock:
+            self._pending.append(("global", None))
+            self.localized = False
+            self.global_running = True
+            self._global_started = self.session.clock.now()
+            self._good_updates = 0
+        self.session.add_event("localization", status="global localization started")
+
+    # ------------------------------------------------------------------ the stage (loop thread)
+    def tick(self, session: Session, frame: SensorFrame, now: float) -> None:
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for kind, arg in pending:
+            self._apply(kind, arg, now)
+        if self.options.source == "truth":
+            self._track_truth(session)
+            return
+        if self.global_running and session.modes.mode != Mode.LOCALIZING:
+            self._end_global(now, "global localization stopped: mode changed", ok=False)
+        if self.amcl is None or frame.scan is None:
+            return
+        if not self.amcl.update(session.odom_pose, frame.scan, self.laser_pose):
+            return
+        self.updates += 1
+        _, cov = self.amcl.estimate()
+        self._cov, self._quality = cov, self.amcl.quality
+        self._particles = np.array(self.amcl.particles, dtype=np.float32)
+        session.map_to_odom = self.amcl.map_to_odom()
+        session.pose = session.map_to_odom.compose(session.odom_pose)
+        if self.global_running:
+            self._check_global(now)
+
+    def _apply(self, kind: str, arg: Any, now: float) -> None:
+        if kind == "map":
+            self.amcl = None
+            self._particles = None
+            self._quality = 0.0
+            return
+        if self.grid is None:
+            return
+        if self.amcl is None or self.amcl.grid is not self.grid:
+            fut = self._amcl_future
+            if fut is None:
+                return
+            self.amcl = fut.result()  # usually long done; a first request right at start waits
+        self.resets += 1
+        if kind == "initial_pose":
+            pose, cov = arg
+            self.amcl.set_initial_pose(pose, cov)
+            # Until the first filter update the estimate is the operator's pose.
+            self.session.map_to_odom = pose.compose(self.session.odom_pose.inverse())
+            self.session.pose = pose
+        elif kind == "global":
+            self.amcl.global_localization()
+        self._particles = np.array(self.amcl.particles, dtype=np.float32)
+
+    def _check_global(self, now: float) -> None:
+        assert self.amcl is not None
+        o = self.options
+        sd = np.sqrt(np.clip(np.diag(self._cov), 0.0, None))
+        good = (
+            self.amcl.converged
+            and sd[0] < o.converged_std_xy
+            and sd[1] < o.converged_std_xy
+            and sd[2] < o.converged_std_yaw
+            and self._quality >= o.min_quality
+        )
+        self._good_updates = self._good_updates + 1 if good else 0
+        if self._good_updates >= o.converged_updates:
+            self._end_global(now, "localized", ok=True)
+        elif now - self._global_started > o.global_timeout:
+            self._end_global(now, f"global localization did not converge in {o.global_timeout:g} s", ok=False)
+
+    def _end_global(self, now: float, reason: str, *, ok: bool) -> None:
+        with self._lock:
+            self.global_running = False
+            self.localized = ok
+        est = self.session.pose
+        self.session.add_event(
+            "localization",
+            status="localized" if ok else "failed",
+            reason=reason,
+            pose=[est.x, est.y, est.theta],
+            seconds=round(now - self._global_started, 2),
+        )
+        if self.session.modes.mode == Mode.LOCALIZING:
+            self.session.modes.enter(Mode.IDLE, reason)
+
+    def _track_truth(self, session: Session) -> None:
+        truth = getattr(session.driver, "truth_pose", None)
+        if truth is None:
+            return
+        session.map_to_odom = truth.compose(session.odom_pose.inverse())
+        session.pose = truth
+        self._quality = 1.0
+
+    def _command(self, now: float) -> Twist2D | None:
+        """Command source for LOCALIZING: rotate in place while global localization runs."""
+        if not self.global_running:
+            return Twist2D()
+        return Twist2D(0.0, 0.0, self.options.spin_speed)
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def quality(self) -> float:
+        return self._quality
+
+    @property
+    def covariance(self) -> np.ndarray:
+        return self._cov.copy()
+
+    def state(self) -> dict[str, Any]:
+        """What ``GET /api/localization`` and the telemetry show."""
+        pose = self.session.pose
+        amcl = self.amcl
+        return {
+            "source": self.options.source,
+            "localized": self.localized,
+            "global_running": self.global_running,
+            "pose": {"x": pose.x, "y": pose.y, "theta": pose.theta},
+            "covariance": np.round(self._cov, 6).tolist(),
+            "particles": 0 if amcl is None else amcl.particle_count,
+            "quality": round(float(self._quality), 4),
+            "updates": self.updates,
+            "map_id": self.map_id,
+            "map_version": self.map_version,
+        }
+
+    def snapshot_fields(self, session: Session) -> dict[str, Any] | None:
+        info = {
+            "quality": round(float(self._quality), 4),
+            "covariance": np.round(self._cov, 6).tolist(),
+            "particles": 0 if self._particles is None else len(self._particles),
+            "localized": self.localized,
+            "global_running": self.global_running,
+        }
+        return {"particles": self._particles, "extras": {"localization": info}}
+
+    def close(self) -> None:
+        self._listeners.clear()
+
+
+def setup(runtime: Runtime) -> Localization:
+    loc = Localization(runtime.session, seed=runtime.settings.seed, map_id=_stock_map_id(runtime))
+    runtime.session.add_stage(loc)
+    runtime.pose_input_handlers["initial_pose"] = loc.set_initial_pose
+
+    def _record_map(grid: OccupancyGrid, map_id: int | None) -> None:
+        runtime.active_map_id = map_id  # type: ignore[attr-defined]  # read by the recorder feature
+
+    loc.add_map_listener(_record_map)
+    return loc
+
+
+def _stock_map_id(runtime: Runtime) -> int | None:
+    if not runtime.world_name:
+        return None
+    try:
+        info = runtime.maps.find(runtime.world_name, stock=True)
+    except Exception:  # the map store is optional for localization
+        return None
+    return None if info is None else info.id

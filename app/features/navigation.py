@@ -1,0 +1,613 @@
+"""Feature: click-to-navigate (Nav2 ``bt_navigator`` + ``planner_server`` + ``controller_server``).
+
+Per tick, after localization: the rolling local costmap (3 x 3 m, Nav2's local costmap) takes the
+new scan, the global costmap (static + obstacle + inflation, from the active map) takes one at its
+``global_update_period``, plan results from the worker pool are handed to the ``Navigator``, and the
+navigator ticks once with the localized pose. Its command is what the NAVIGATING command source
+returns; its outcome puts the robot back in IDLE with a ``navigation`` event (reached / failed with
+the typed reason / cancelled).
+
+Planning runs on ``session.workers`` (``request_plan`` -> future -> ``deliver_plan`` on the loop
+thread). With a virtual clock the loop waits for the future in the same tick, so a simulated run is
+deterministic for a seed however fast the machine is.
+
+Recovery hook: when the navigator is STUCK and a ``RecoveryPolicy`` is installed
+(``feature.recovery = policy``), the mode goes to RECOVERING and the policy drives until it says it
+is done, then the navigator resumes. Without one the navigator's ``stuck_timeout`` fails the goal.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections.abc import Sequence
+from concurrent.futures import Future
+from dataclasses import dataclass, field, replace
+from typing import TYPE_CHECKING, Any, Literal, Protocol
+
+import numpy as np
+
+from app.modes import Mode, TransitionRefused
+from nav.navigator import TERMINAL
+from nav.types import (
+    INSCRIBED_INFLATED_OBSTACLE,
+    LETHAL_OBSTACLE,
+    NO_INFORMATION,
+    ZERO_TWIST,
+    Costmap,
+    OccupancyGrid,
+    Path,
+    Pose2D,
+    Twist2D,
+)
+
+if TYPE_CHECKING:
+    from app.features.localization import Localization
+    from app.runtime import Runtime
+    from app.session import Session
+    from nav.navigator import NavTick, PlanRequest
+    from robot.base import SensorFrame
+
+ORDER = 40
+log = logging.getLogger("navdeck.navigation")
+
+
+class GoalRejected(ValueError):
+    """A goal the costmap refuses (422): ``reason`` names why, ``nearest_free`` suggests a pose."""
+
+    def __init__(self, reason: str, goal: Pose2D, nearest_free: Pose2D | None, index: int = 0) -> None:
+        where = f"goal {index + 1}" if index else "goal"
+        super().__init__(f"{where} ({goal.x:.2f}, {goal.y:.2f}) is {reason}")
+        self.reason = reason
+        self.goal = goal
+        self.nearest_free = nearest_free
+        self.index = index
+
+    def as_dict(self) -> dict[str, Any]:
+        nf = self.nearest_free
+        return {
+            "detail": str(self),
+            "reason": self.reason,
+            "index": self.index,
+            "nearest_free": None if nf is None else {"x": nf.x, "y": nf.y, "theta": nf.theta},
+        }
+
+
+class NavigationRefused(RuntimeError):
+    """Navigation is not possible now (409): not localized, e-stop, fault, mode refuses."""
+
+    def __init__(self, detail: str, mode: str, allowed: list[str] | None = None) -> None:
+        super().__init__(detail)
+        self.mode = mode
+        self.allowed = allowed or []
+
+    def as_dict(self) -> dict[str, Any]:
+        return {"detail": str(self), "mode": self.mode, "allowed": self.allowed}
+
+
+class RecoveryPolicy(Protocol):
+    """Hook for recovery behaviours (Nav2's recovery subtree): spin, back up, clear costmaps..."""
+
+    def start(self, feature: Navigation, reason: str, now: float) -> bool:
+        """Begin recovering from ``reason`` (the navigator's stuck reason); False: nothing to try."""
+        ...
+
+    def tick(self, feature: Navigation, now: float) -> tuple[Twist2D | None, bool]:
+        """(command, finished) for this cycle while in RECOVERING."""
+        ...
+
+
+_TRIGGERS = {
+    "NoProgress": "no_progress",
+    "PatienceExceeded": "controller_failure",
+    "NoValidControl": "controller_failure",
+}
+
+
+class BehaviorRecovery:
+    """``RecoveryPolicy`` hook over ``nav.recovery.RecoveryPolicy`` (Nav2's default tree: round robin
+    clear local -> clear global -> spin -> wait -> back up, ``number_of_retries`` per goal).
+
+    The behaviours get the localized pose and the local costmap, both in the map frame (one frame is
+    all they need: they measure their own motion and check collisions in it). Every attempt and
+    result becomes a ``recovery`` event."""
+
+    def __init__(self, options: Any = None) -> None:
+        from nav.recovery import RecoveryPolicy
+
+        self._feature: Navigation | None = None
+        self.policy = RecoveryPolicy(options, on_event=self._event)
+
+    def _event(self, ev: Any) -> None:
+        if self._feature is not None:
+            self._feature.session.add_event("recovery", **ev.as_dict())
+
+    def _ctx(self, feature: Navigation, now: float) -> Any:
+        from nav.behaviors import BehaviorContext
+        from nav.behaviors.base import BehaviorLimits
+
+        s = feature.session
+        return BehaviorContext(
+            now=now,
+            pose=s.pose,
+            velocity=s.velocity,
+            costmap=feature.local_costmap,
+            footprint=np.asarray(feature.profile.footprint, dtype=float)
+            if feature.profile.footprint
+            else None,
+            limits=BehaviorLimits.from_profile(feature.profile),
+            scan_match_score=lambda: feature.localization.quality,
+            clear_local_costmap=feature.clear_local_costmap,
+            clear_global_costmap=feature.clear_global_costmap,
+        )
+
+    def reset(self) -> None:
+        """A new request: the full retry budget again."""
+        self.policy.reset()
+
+    def start(self, feature: Navigation, reason: str, now: float) -> bool:
+        from nav.recovery import Trigger
+
+        self._feature = feature
+        trigger = Trigger(_TRIGGERS.get(reason, "planner_failure"))
+        return self.policy.on_failure(trigger, self._ctx(feature, now), reason) is not None
+
+    def tick(self, feature: Navigation, now: float) -> tuple[Twist2D | None, bool]:
+        from nav.behaviors import Status
+
+        if self.policy.active is None:  # finished (or failed) right at start
+            return ZERO_TWIST, True
+        status = self.policy.tick(self._ctx(feature, now))
+        return self.policy.command, status is not Status.RUNNING
+
+
+@dataclass(frozen=True)
+class NavigationOptions:
+    """Options of the navigation stage; the algorithms' own options come from their dataclasses."""
+
+    planner: Literal["astar", "dijkstra"] = "astar"
+    """Global planner plugin (Nav2 ``planner_plugins``): ``astar`` or ``dijkstra`` (NavFn)."""
+    inflation_radius: float = 0.55
+    """Inflation radius (m) of both costmaps (Nav2 ``inflation_layer.inflation_radius`` 0.55)."""
+    cost_scaling_factor: float = 3.0
+    """Exponential decay rate of inflated cost (Nav2 ``cost_scaling_factor``, default 3.0 in
+    the global costmap of nav2_params.yaml, 10.0 in the plugin)."""
+    local_width: float = 3.0
+    """Rolling local costmap width (m), Nav2 default 3."""
+    local_height: float = 3.0
+    """Rolling local costmap height (m), Nav2 default 3."""
+    local_static_layer: bool = True
+    """Include the map in the local costmap too (Nav2's default local costmap has no static layer;
+    with it the controller keeps off walls the lidar cannot see, e.g. below ``range_min``)."""
+    global_update_period: float = 1.0
+    """Seconds between obstacle-layer updates of the global costmap (Nav2 ``update_frequency`` 1 Hz)."""
+    goal_search_radius: float = 3.0
+    """How far (m) from a refused goal to look for the nearest free pose to suggest."""
+    costmap_view: Literal["global", "local"] = "global"
+    """Which costmap the 3D view shows as ``extras["costmap"]``."""
+    wait_for_plans: bool | None = None
+    """Block the tick until a requested plan is back; None: only with a virtual clock."""
+    dwa_overrides: dict[str, Any] = field(default_factory=dict)
+    """DwaOptions fields over the profile-derived ones."""
+    recovery: bool = True
+    """Install ``BehaviorRecovery`` (Nav2's recovery subtree) as the recovery hook."""
+
+
+class Navigation:
+    """The navigation stage. ``set_goals`` / ``cancel`` are thread-safe (API, viewer clicks)."""
+
+    def __init__(
+        self,
+        session: Session,
+        localization: Localization,
+        options: NavigationOptions | None = None,
+    ) -> None:
+        from nav.control import GoalChecker, ProgressChecker
+        from nav.navigator import Navigator, NavigatorOptions
+        from nav.planning import make_planner
+
+        self.session = session
+        self.localization = localization
+        self.options = o = options or NavigationOptions()
+        self.profile = session.profile
+        self.planner = make_planner(o.planner)
+        self.navigator = Navigator.for_robot(
+            self.profile,
+            None,
+            NavigatorOptions(nominal_speed=0.5 * self.profile.limits.max_vel_x),
+            request_plan=self._request_plan,
+            goal_checker=GoalChecker(),
+            progress_checker=ProgressChecker(),
+            **o.dwa_overrides,
+        )
+        virtual = bool(getattr(session.clock, "is_virtual", False))
+        self._wait = virtual if o.wait_for_plans is None else o.wait_for_plans
+        self._lock = threading.Lock()
+        self._pending: list[tuple[str, Any]] = []
+        self._futures: list[tuple[int, Future]] = []
+        self._cmd: Twist2D | None = ZERO_TWIST
+        self._last_tick: NavTick | None = None
+        self.last_outcome: dict[str, Any] | None = None
+        self.recovery: RecoveryPolicy | None = BehaviorRecovery() if o.recovery else None
+        self.recoveries = 0
+        self.plans = 0
+        self._global = None
+        self._global_cm: Costmap | None = None
+        self._local = None
+        self._local_cm: Costmap | None = None
+        self._costmap_version = 0
+        self._last_global_update = -math.inf
+        self._seen_resets = 0
+        self.costmap_view: str = o.costmap_view  # "global" | "local": which one the 3D view shows
+        self._active = False
+        self._waypoints: tuple[tuple[Pose2D, ...], np.ndarray] | None = None
+        self._build_costmaps(localization.grid)
+        localization.add_map_listener(self._on_map)
+        session.set_command_source(Mode.NAVIGATING, self._command)
+        session.set_command_source(Mode.RECOVERING, self._recovery_command)
+        session.modes.set_guard(Mode.NAVIGATING, self._guard)
+        self._recovery_cmd: Twist2D | None = ZERO_TWIST
+
+    # ------------------------------------------------------------------ costmaps
+    def _costmap_options(self, rolling: bool):
+        from nav.costmap import CostmapOptions, InflationOptions, local_costmap_options
+
+        fp = tuple(self.profile.footprint)
+        radius = self.profile.robot_radius if self.profile.robot_radius > 0 else 0.1
+        infl = InflationOptions(
+            inflation_radius=self.options.inflation_radius,
+            cost_scaling_factor=self.options.cost_scaling_factor,
+        )
+        if rolling:
+            return local_costmap_options(
+                width=self.options.local_width,
+                height=self.options.local_height,
+                footprint=fp,
+                robot_radius=radius,
+                use_static_layer=self.options.local_static_layer,
+                inflation_layer=infl,
+            )
+        return CostmapOptions(footprint=fp, robot_radius=radius, inflation_layer=infl)
+
+    def _build_costmaps(self, grid: OccupancyGrid | None) -> None:
+        from nav.costmap import Costmap2D
+
+        if grid is None:
+            self._global = self._local = None
+            self._global_cm = self._local_cm = None
+            return
+        lo = replace(self._costmap_options(True), resolution=grid.resolution)
+        self._global = Costmap2D.from_map(grid, self._costmap_options(False))
+        self._global_cm = self._global.costmap()
+        self._local = Costmap2D.rolling(lo, self.session.pose, grid)
+        self._local_cm = self._local.costmap()
+        self._costmap_version += 1
+
+    def _on_map(self, grid: OccupancyGrid, map_id: int | None) -> None:
+        with self._lock:
+            self._pending.append(("map", grid))
+
+    @property
+    def global_costmap(self) -> Costmap | None:
+        """The latest global costmap snapshot (immutable once published)."""
+        return self._global_cm
+
+    @property
+    def local_costmap(self) -> Costmap | None:
+        return self._local_cm
+
+    # ------------------------------------------------------------------ requests (any thread)
+    def check_goal(self, goal: Pose2D, index: int = 0) -> None:
+        """Raise ``GoalRejected`` for a goal off the map, in an obstacle, inside the inscribed radius
+        of one, or in unknown space; the error carries the nearest traversable pose."""
+        from nav.planning import nearest_free_pose
+
+        cm = self._global_cm
+        if cm is None:
+            raise NavigationRefused("no active map: choose a map first", self.session.modes.mode.value)
+        if not goal.is_finite():
+            raise GoalRejected("not a finite pose", goal, None, index)
+        geo = cm.geometry
+        rows, cols = geo.world_to_cell(np.array([goal.x, goal.y]))
+        r = self.options.goal_search_radius
+        if not geo.in_bounds(rows, cols)[0]:
+            w, h = geo.size_m
+            o = geo.origin
+            inside = Pose2D(
+                float(np.clip(goal.x, o.x, o.x + w - 1e-6)),
+                float(np.clip(goal.y, o.y, o.y + h - 1e-6)),
+                goal.theta,
+            )
+            raise GoalRejected("off the map", goal, nearest_free_pose(cm, inside, r), index)
+        cost = int(cm.costs[rows[0], cols[0]])
+        reason = {
+            LETHAL_OBSTACLE: "inside an obstacle",
+            INSCRIBED_INFLATED_OBSTACLE: "inside the inscribed radius of an obstacle",
+            NO_INFORMATION: "in unknown space",
+        }.get(cost)
+        if reason is not None:
+            raise GoalRejected(reason, goal, nearest_free_pose(cm, goal, r), index)
+
+    def set_goals(self, goals: Sequence[Pose2D]) -> None:
+        """Validate ``goals`` (raises GoalRejected / NavigationRefused) and start navigating through
+        them in order; replaces the current request."""
+        goals = list(goals)
+        if not goals:
+            raise GoalRejected("missing", Pose2D(), None)
+        mode = self.session.modes.mode
+        if mode in (Mode.ESTOP, Mode.FAULT) or self.session.estop_latched:
+            raise NavigationRefused(f"cannot navigate in mode {mode.value} (reset first)", mode.value)
+        why = self._guard()
+        if why:
+            raise NavigationRefused(why, mode.value, self.session.modes.allowed())
+        for i, g in enumerate(goals):
+            self.check_goal(g, i)
+        try:  # mode first: the loop never sees goals without the mode that drives them
+            self.session.modes.request(Mode.NAVIGATING, "navigation goal")
+        except TransitionRefused as exc:
+            raise NavigationRefused(exc.reason, exc.current.value, exc.allowed) from None
+        with self._lock:
+            self._pending.append(("goals", goals))
+        self.session.add_event(
+            "navigation", status="goal accepted", goals=[[g.x, g.y, g.theta] for g in goals]
+        )
+
+    def add_goal(self, goal: Pose2D) -> None:
+        """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle."""
+        with self._lock:
+            queued = [g for kind, arg in self._pending if kind == "goals" for g in arg]
+        done = self._last_tick.feedback.goal_index if self._last_tick is not None else 0
+        current = self.navigator.goals[done:] if self._active else []
+        self.set_goals([*current, *queued, goal] if (current or queued) else [goal])
+
+    def cancel(self) -> bool:
+        """Cancel navigation (outcome ``cancelled`` next tick). False if nothing was running."""
+        with self._lock:
+            running = self._active or any(k == "goals" for k, _ in self._pending)
+            self._pending.append(("cancel", None))
+        return running
+
+    def _guard(self) -> str | None:
+        if not self.localization.localized:
+            return "not localized: set the initial pose or run global localization"
+        if self._global_cm is None:
+            return "no active map"
+        return None
+
+    # ------------------------------------------------------------------ the stage (loop thread)
+    def tick(self, session: Session, frame: SensorFrame, now: float) -> None:
+        with self._lock:
+            pending, self._pending = self._pending, []
+        for kind, arg in pending:
+            if kind == "map":
+                self._abort("active map changed", now)
+                self._build_costmaps(arg)
+            elif kind == "goals":
+                self.navigator.set_goals(arg)
+                if self.recovery is not None and hasattr(self.recovery, "reset"):
+                    self.recovery.reset()
+                self.last_outcome = None  # the outcome of *this* request, once it ends
+                self._futures.clear()
+                self._active = True
+            elif kind == "cancel" and self._active:
+                self.navigator.cancel()
+                if session.modes.mode == Mode.RECOVERING:  # the navigator reports it on its next tick
+                    session.modes.enter(Mode.NAVIGATING, "cancel during recovery")
+        if self._global is None or self._local is None:
+            self._cmd = None
+            return
+        self._update_costmaps(session, frame, now)
+        mode = session.modes.mode
+        if self._active and mode not in (Mode.NAVIGATING, Mode.RECOVERING):
+            self.navigator.cancel()  # the operator took over, e-stop, fault...
+        if not self._active:
+            self._cmd = ZERO_TWIST
+            return
+        if mode == Mode.RECOVERING:
+            self._tick_recovery(now)
+            return
+        self._collect_plans()
+        tick = self.navigator.tick(now, session.pose, session.velocity, self._global_cm, self._local_cm)
+        if tick.outcome is None and tick.state in TERMINAL and self.navigator.outcome is not None:
+            # a plan failure delivered before the tick ends the request without a fresh NavTick
+            tick = replace(tick, outcome=self.navigator.outcome)
+        self._last_tick = tick
+        self._cmd = tick.cmd
+        if tick.outcome is not None:
+            self._finish(tick, now)
+        elif tick.state.value == "stuck" and mode == Mode.NAVIGATING:
+            self._maybe_recover(tick.feedback.stuck_reason, now)
+
+    def _update_costmaps(self, session: Session, frame: SensorFrame, now: float) -> None:
+        lp = self.localization.laser_pose
+        pose = session.pose
+        assert self._local is not None and self._global is not None
+        loc = self.localization
+        if loc.resets != self._seen_resets:
+            # the pose jumped (initial pose, global reset): marks made from the old pose are wrong
+            self._seen_resets = loc.resets
+            self.clear_costmaps()
+        if not loc.localized:
+            return  # scans placed with an unknown pose would mark obstacles in the wrong places
+        if frame.scan is None:
+            # The window follows the robot at scan rate (>= 5 Hz: a few cm of travel); moving it
+            # without new data would only re-inflate the same cells every tick.
+            return
+        self._local.update_from_scan(pose, frame.scan, lp)
+        self._local_cm = self._local.costmap()
+        if now - self._last_global_update >= self.options.global_update_period:
+            self._last_global_update = now
+            self._global.update_from_scan(pose, frame.scan, lp)
+            self._global_cm = self._global.costmap()
+            self._costmap_version += 1
+
+    def _request_plan(self, req: PlanRequest) -> None:
+        self.plans += 1
+        fut = self.session.workers.submit(self.planner.plan, req.costmap, req.start, req.goal)
+        self._futures.append((req.id, fut))
+        if self._wait:
+            fut.exception()  # wait: deterministic under a virtual clock
+
+    def _collect_plans(self) -> None:
+        still = []
+        for rid, fut in self._futures:
+            if not fut.done():
+                still.append((rid, fut))
+                continue
+            exc = fut.exception()
+            self.navigator.deliver_plan(rid, exc if exc is not None else fut.result())
+        self._futures = still
+
+    def _finish(self, tick: NavTick, now: float) -> None:
+        out = tick.outcome
+        assert out is not None
+        self._active = False
+        self._futures.clear()
+        self.last_outcome = {
+            "kind": out.kind,
+            "reason": out.reason,
+            "message": out.message,
+            "goals_reached": out.goals_reached,
+            "t": round(now - self.session.started_at, 3),
+        }
+        self.session.add_event(
+            "navigation",
+            status={"reached": "goal reached", "failed": "navigation failed", "cancelled": "cancelled"}[
+                out.kind
+            ],
+            outcome=out.kind,
+            reason=out.reason,
+            message=out.message,
+            goals_reached=out.goals_reached,
+        )
+        if self.session.modes.mode in (Mode.NAVIGATING, Mode.RECOVERING):
+            self.session.modes.enter(Mode.IDLE, f"navigation {out.kind}")
+
+    def _abort(self, reason: str, now: float) -> None:
+        if self._active:
+            self.navigator.cancel()
+            tick = self.navigator.tick(now, self.session.pose, self.session.velocity, self._global_cm)
+            if tick.outcome is not None:
+                self._finish(tick, now)
+            self._active = False
+
+    def _maybe_recover(self, reason: str, now: float) -> None:
+        """The recovery hook: hand a STUCK navigator to the policy (mode RECOVERING), if any."""
+        if self.recovery is None or not self.recovery.start(self, reason, now):
+            return
+        self.recoveries += 1
+        self.session.add_event("recovery", status="started", reason=reason)
+        self.session.modes.enter(Mode.RECOVERING, f"recovering: {reason}")
+
+    def _tick_recovery(self, now: float) -> None:
+        assert self.recovery is not None
+        cmd, done = self.recovery.tick(self, now)
+        self._recovery_cmd = cmd
+        if done:
+            self.navigator.resume()
+            self.session.add_event("recovery", status="finished")
+            self.session.modes.enter(Mode.NAVIGATING, "recovery finished")
+
+    def clear_local_costmap(self) -> None:
+        """Clear the local obstacle layer (Nav2 ClearEntireCostmap on the local costmap)."""
+        if self._local is not None:
+            self._local.clear()
+            self._local_cm = self._local.costmap()
+
+    def clear_global_costmap(self) -> None:
+        """Clear the global obstacle layer."""
+        if self._global is not None:
+            self._global.clear()
+            self._global_cm = self._global.costmap()
+            self._costmap_version += 1
+
+    def clear_costmaps(self) -> None:
+        """Clear the obstacle layers (Nav2 ClearEntireCostmap); loop thread only (recoveries)."""
+        if self._local is not None and self._global is not None:
+            self._local.clear()
+            self._global.clear()
+            self._global_cm = self._global.costmap()
+            self._local_cm = self._local.costmap()
+            self._costmap_version += 1
+
+    def _command(self, now: float) -> Twist2D | None:
+        return self._cmd
+
+    def _recovery_command(self, now: float) -> Twist2D | None:
+        return self._recovery_cmd
+
+    # ------------------------------------------------------------------ outputs
+    @property
+    def active(self) -> bool:
+        return self._active
+
+    def state(self) -> dict[str, Any]:
+        """``GET /api/navigation`` and telemetry: state, goal(s), feedback and the last outcome."""
+        tick = self._last_tick
+        fb = tick.feedback if tick is not None else None
+        goals = self.navigator.goals if self._active else []
+        goal = fb.goal if fb is not None and self._active else None
+        return {
+            "state": self.navigator.state.value if self._active or tick is None else tick.state.value,
+            "active": self._active,
+            "planner": self.options.planner,
+            "goal": None if goal is None else _pose(goal),
+            "goal_index": fb.goal_index if fb is not None else 0,
+            "goals": [_pose(g) for g in goals],
+            "distance_remaining": None if fb is None else round(fb.distance_remaining, 3),
+            "eta_s": None if fb is None or not math.isfinite(fb.eta) else round(fb.eta, 1),
+            "activity": "idle" if fb is None else fb.activity,
+            "outcome": self.last_outcome,
+            "recoveries": self.recoveries,
+            "costmap_view": self.costmap_view,
+        }
+
+    def path(self) -> Path | None:
+        return self.navigator.path if self._active else None
+
+    def snapshot_fields(self, session: Session) -> dict[str, Any] | None:
+        tick = self._last_tick
+        local = self.costmap_view == "local"
+        extras: dict[str, Any] = {
+            "costmap": self._local_cm if local else self._global_cm,
+            "costmap_version": ("local", id(self._local_cm)) if local else self._costmap_version,
+            "navigation": self.state(),
+        }
+        if not self._active or tick is None:
+            return {"extras": extras}
+        fb = tick.feedback
+        goals = self.navigator.goals[fb.goal_index :]
+        if goals:
+            key = tuple(goals)
+            if self._waypoints is None or self._waypoints[0] != key:
+                self._waypoints = (key, np.array([[g.x, g.y, g.theta] for g in goals]))
+            extras["waypoints"] = self._waypoints[1]
+        if fb.trajectories is not None and fb.chosen >= 0:
+            extras["local_plan_best"] = fb.chosen
+        return {
+            "path": fb.path,
+            "goal": fb.goal,
+            "local_plan": fb.trajectories,
+            "extras": extras,
+        }
+
+    def close(self) -> None:
+        for _, fut in self._futures:
+            fut.cancel()
+        self._futures.clear()
+
+
+def _pose(p: Pose2D) -> dict[str, float]:
+    return {"x": round(p.x, 4), "y": round(p.y, 4), "theta": round(p.theta, 4)}
+
+
+def setup(runtime: Runtime) -> Navigation | None:
+    loc = runtime.features.get("localization")
+    if loc is None:
+        log.warning("navigation needs the localization feature")
+        return None
+    nav = Navigation(runtime.session, loc)  # type: ignore[arg-type]
+    runtime.session.add_stage(nav)
+    runtime.pose_input_handlers["goal"] = nav.add_goal
+    return nav

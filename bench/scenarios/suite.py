@@ -1,0 +1,268 @@
+"""Trial sets and their runner.
+
+* ``random_goal_trials``: the issue's target, >= 50 random reachable goals per stock world. The robot
+  starts at the world's start pose and drives from goal to goal like an operator clicking goals; each
+  goal is drawn uniformly over free space at least ``clearance`` from any wall, 1.5..8 m away, and
+  kept only if A* finds a path to it from where the robot stands. After a failed goal the robot is
+  carried to a random free spot and its pose set (an operator's rescue), so failures do not cascade.
+* Source A's sets (Vietnamese ROS2 thesis, 20 trials each): ``straight_trials`` (no obstacle, goal
+  straight ahead), ``turn_trials`` (no obstacle, the goal round a corner of an L-shaped corridor),
+  ``fixed_obstacle_trials`` (a 30 x 30 cm box on the straight line that is in the world but not on
+  the map, so only the lidar sees it). Each trial is a fresh simulated robot; seeds vary the start,
+  the goal, sensor noise and wheel slip.
+
+Every trial localizes with AMCL from the operator's initial pose (the true start), as a user would.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from app.commands.sim_nav import SimNavResult, SimStack, build_sim_stack, drive
+from nav.types import GridGeometry, OccupancyGrid, Pose2D
+from robot.sim import World
+
+
+@dataclass(frozen=True)
+class TrialResult:
+    name: str
+    start: Pose2D
+    goal: Pose2D
+    result: SimNavResult
+
+
+@dataclass
+class SetResult:
+    """The results of one trial set and the figures derived from them."""
+
+    name: str
+    trials: list[TrialResult] = field(default_factory=list)
+    cpu_s: float = 0.0
+    wall_s: float = 0.0
+
+    @property
+    def n(self) -> int:
+        return len(self.trials)
+
+    @property
+    def reached(self) -> int:
+        return sum(t.result.reached for t in self.trials)
+
+    @property
+    def collisions(self) -> int:
+        return sum(t.result.collisions for t in self.trials)
+
+    @property
+    def sim_s(self) -> float:
+        return sum(t.result.time_s for t in self.trials)
+
+    @property
+    def reached_pct(self) -> float:
+        return 100.0 * self.reached / max(1, self.n)
+
+    @property
+    def localization_rms(self) -> float:
+        e = np.array([t.result.localization_error_m for t in self.trials])
+        return float(np.sqrt(np.mean(e**2))) if e.size else 0.0
+
+    def failures(self) -> list[str]:
+        return [
+            f"{t.name}: {t.result.outcome} {t.result.reason} start {t.start} goal {t.goal}"
+            for t in self.trials
+            if not t.result.reached
+        ]
+
+
+OnTrial = Callable[[TrialResult], None]
+
+
+def _run(
+    stack: SimStack, name: str, start: Pose2D, goal: Pose2D, timeout: float, on_trial: OnTrial | None
+) -> TrialResult:
+    trial = TrialResult(name, start, goal, drive(stack, [goal], timeout))
+    if on_trial is not None:
+        on_trial(trial)
+    return trial
+
+
+def _grid_from_mask(occupied: np.ndarray, resolution: float = 0.05) -> OccupancyGrid:
+    data = np.where(occupied, 100, 0).astype(np.int8)
+    return OccupancyGrid(GridGeometry(resolution, data.shape[1], data.shape[0]), data)
+
+
+def _box(width: float, height: float) -> OccupancyGrid:
+    return World.box(width, height).grid
+
+
+def _l_corridor() -> OccupancyGrid:
+    """An L of 2 m wide corridors: along x at y 0..2 (x 0..8), then up along y at x 0..2 (y 0..8)."""
+    res, size = 0.05, 8.0
+    n = round(size / res)
+    occ = np.ones((n, n), dtype=bool)
+    w = round(2.0 / res)
+    occ[:w, :] = False
+    occ[:, :w] = False
+    t = 2  # 10 cm walls round the outside
+    occ[:t, :] = occ[-t:, :] = occ[:, :t] = occ[:, -t:] = True
+    occ[w:, w : w + t] = True
+    occ[w : w + t, w:] = True
+    return _grid_from_mask(occ, res)
+
+
+def _fresh(grid: OccupancyGrid, start: Pose2D, seed: int, obstacles=()) -> SimStack:
+    world = World(OccupancyGrid(grid.geometry, grid.data.copy()), name="trial", start_pose=start)
+    for poly in obstacles:
+        world.add_polygon(poly)
+    stack = build_sim_stack(grid, world, start, seed=seed)
+    stack.localization.set_initial_pose(start)
+    return stack
+
+
+def _timed(name: str, fn) -> SetResult:
+    out = SetResult(name)
+    c0, w0 = time.process_time(), time.perf_counter()
+    fn(out)
+    out.cpu_s, out.wall_s = time.process_time() - c0, time.perf_counter() - w0
+    return out
+
+
+def straight_trials(
+    n: int = 20, seed: int = 0, timeout: float = 60.0, on_trial: OnTrial | None = None
+) -> SetResult:
+    """No obstacle, straight: a 10 x 4 m room, goal 2..5 m straight ahead of the start heading."""
+    grid = _box(10.0, 4.0)
+    rng = np.random.default_rng(seed)
+
+    def run(out: SetResult) -> None:
+        for i in range(n):
+            d = float(rng.uniform(2.0, 5.0))
+            y = float(rng.uniform(1.5, 2.5))
+            x0 = float(rng.uniform(1.0, 9.0 - d))
+            start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
+            if rng.random() < 0.5:  # half of them the other way
+                start, goal = Pose2D(goal.x, y, math.pi), Pose2D(start.x, y, math.pi)
+            stack = _fresh(grid, start, seed * 1000 + i)
+            try:
+                out.trials.append(_run(stack, f"straight {i}", start, goal, timeout, on_trial))
+            finally:
+                stack.session.close()
+
+    return _timed("straight", run)
+
+
+def turn_trials(
+    n: int = 20, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None
+) -> SetResult:
+    """No obstacle, with turns: from the far end of the L's horizontal leg round the corner to the
+    vertical leg, facing along it (a left turn of 90 degrees plus the approach)."""
+    grid = _l_corridor()
+    rng = np.random.default_rng(seed)
+
+    def run(out: SetResult) -> None:
+        for i in range(n):
+            start = Pose2D(float(rng.uniform(5.0, 7.0)), float(rng.uniform(0.7, 1.3)), math.pi)
+            goal = Pose2D(float(rng.uniform(0.7, 1.3)), float(rng.uniform(5.0, 7.0)), math.pi / 2)
+            stack = _fresh(grid, start, seed * 1000 + i)
+            try:
+                out.trials.append(_run(stack, f"turn {i}", start, goal, timeout, on_trial))
+            finally:
+                stack.session.close()
+
+    return _timed("turns", run)
+
+
+def fixed_obstacle_trials(
+    n: int = 20, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None
+) -> SetResult:
+    """A fixed obstacle the map does not have: a 30 x 30 cm box midway on the straight line."""
+    grid = _box(10.0, 4.0)
+    rng = np.random.default_rng(seed)
+
+    def run(out: SetResult) -> None:
+        for i in range(n):
+            y = float(rng.uniform(1.6, 2.4))
+            x0 = float(rng.uniform(1.0, 2.0))
+            d = float(rng.uniform(4.0, 6.0))
+            start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
+            cx, cy = x0 + d / 2 + float(rng.uniform(-0.3, 0.3)), y + float(rng.uniform(-0.1, 0.1))
+            box = [
+                (cx - 0.15, cy - 0.15),
+                (cx + 0.15, cy - 0.15),
+                (cx + 0.15, cy + 0.15),
+                (cx - 0.15, cy + 0.15),
+            ]
+            stack = _fresh(grid, start, seed * 1000 + i, obstacles=[box])
+            try:
+                out.trials.append(_run(stack, f"obstacle {i}", start, goal, timeout, on_trial))
+            finally:
+                stack.session.close()
+
+    return _timed("fixed obstacle", run)
+
+
+def _free_poses(stack: SimStack, clearance: float, rng: np.random.Generator, k: int) -> np.ndarray:
+    from scipy.ndimage import distance_transform_edt
+
+    grid = stack.localization.grid
+    assert grid is not None
+    clear = distance_transform_edt(grid.free_mask()) * grid.resolution
+    r, c = np.nonzero(clear > clearance)
+    pick = rng.choice(r.size, k, replace=True)
+    return grid.geometry.cell_to_world(r[pick], c[pick])
+
+
+def random_goal_trials(
+    world_name: str,
+    n: int = 50,
+    seed: int = 0,
+    timeout: float = 90.0,
+    clearance: float = 0.4,
+    on_trial: OnTrial | None = None,
+) -> SetResult:
+    """``n`` random reachable goals in a stock world, driven one after the other (see module doc)."""
+    from maps.stock import stock_world_path
+    from nav.planning import PlannerError
+
+    world = World.from_yaml(stock_world_path(world_name))
+    stack = build_sim_stack(world.grid, world, world.start_pose, seed=seed)
+    stack.localization.set_initial_pose(world.start_pose)
+    rng = np.random.default_rng(seed)
+
+    def run(out: SetResult) -> None:
+        tries = 0
+        while out.n < n and tries < 20 * n:
+            tries += 1
+            here = stack.driver.truth_pose
+            cands = _free_poses(stack, clearance, rng, 16)
+            d = np.hypot(cands[:, 0] - here.x, cands[:, 1] - here.y)
+            ok = np.flatnonzero((d > 1.5) & (d < 8.0))
+            if ok.size == 0:
+                continue
+            x, y = cands[ok[0]]
+            goal = Pose2D(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
+            cm = stack.navigation.global_costmap
+            try:  # reachable from where the robot stands (the issue's "random reachable goals")
+                stack.navigation.planner.plan(cm, stack.session.pose, goal)
+            except PlannerError:
+                continue
+            trial = _run(stack, f"{world_name} {out.n}", here, goal, timeout, on_trial)
+            out.trials.append(trial)
+            if not trial.result.reached:
+                # An operator would rescue a robot that gave up (often wedged against something
+                # with no recovery behaviour yet): carry it to a free spot and set its pose, so one
+                # failure is counted once instead of failing every later goal from the same place.
+                x, y = _free_poses(stack, 0.6, rng, 1)[0]
+                rescue = Pose2D(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
+                stack.driver.teleport(rescue)
+                stack.localization.set_initial_pose(rescue)
+                stack.session.run_for(0.5)
+
+    try:
+        return _timed(world_name, run)
+    finally:
+        stack.session.close()
