@@ -30,7 +30,12 @@ def _lagged_run(options: SlamOptions, lag: int = 1) -> float:
 
 def test_every_scan_matched_beats_odometry_between_nodes() -> None:
     # a coarse motion filter leaves most scans between nodes, where only matching can fix the lag
-    base = SlamOptions(minimum_travel_distance=0.5, minimum_travel_heading=np.radians(40))
+    base = SlamOptions(
+        minimum_travel_distance=0.5,
+        minimum_travel_heading=np.radians(40),
+        match_every_scan=True,
+        linear_search_window=0.2,
+    )
     matched = _lagged_run(base)
     dead_reckoned = _lagged_run(SlamOptions(**{**base.__dict__, "match_every_scan": False}))
     assert matched < 0.08, matched
@@ -39,7 +44,8 @@ def test_every_scan_matched_beats_odometry_between_nodes() -> None:
 
 def test_translation_window_covers_lagged_odometry() -> None:
     # odometry two scans late: the prediction is ~0.24 m off, beyond a 0.1 m window
-    narrow = _lagged_run(SlamOptions(linear_search_window=0.1), lag=2)
-    wide = _lagged_run(SlamOptions(linear_search_window=0.3), lag=2)
+    fixed = {"linear_search_window_per_radian": 0.0, "search_levels": 0, "match_every_scan": True}
+    narrow = _lagged_run(SlamOptions(linear_search_window=0.1, **fixed), lag=2)
+    wide = _lagged_run(SlamOptions(linear_search_window=0.3, **fixed), lag=2)
     assert wide < 0.1, wide
     assert narrow > wide, (narrow, wide)
