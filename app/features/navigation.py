@@ -30,6 +30,7 @@ import numpy as np
 
 from app.modes import Mode, TransitionRefused
 from nav.navigator import TERMINAL
+from nav.planning.errors import PlannerError
 from nav.types import (
     INSCRIBED_INFLATED_OBSTACLE,
     LETHAL_OBSTACLE,
@@ -352,6 +353,8 @@ class Navigation:
         self.session.add_event(
             "navigation", status="goal accepted", goals=[[g.x, g.y, g.theta] for g in goals]
         )
+        for g in goals:  # one typed event per goal: what run metrics and the run timeline count
+            self.session.add_event("goal", pose=[g.x, g.y, g.theta])
 
     def add_goal(self, goal: Pose2D) -> None:
         """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle."""
@@ -481,6 +484,10 @@ class Navigation:
             message=out.message,
             goals_reached=out.goals_reached,
         )
+        typed = {"reached": "goal_reached", "failed": "goal_failed", "cancelled": "goal_canceled"}[out.kind]
+        self.session.add_event(typed, reason=out.reason, message=out.message)
+        if out.kind == "failed" and isinstance(out.error, PlannerError):
+            self.session.add_event("plan_failed", reason=out.reason)
         if self.session.modes.mode in (Mode.NAVIGATING, Mode.RECOVERING):
             self.session.modes.enter(Mode.IDLE, f"navigation {out.kind}")
 
