@@ -184,6 +184,8 @@ def test_optional_layers_and_checkboxes(viewer: Viewer) -> None:
     )
     viewer.apply(s0)
     s = viewer.server.scene
+    assert not viewer.is_shown("/costmap")  # hidden by default, like Rviz; its checkbox shows it
+    viewer.set_layer_enabled("Costmap", True)
     for node in ("/costmap", "/plan/local", "/goal", "/graph/edges"):
         assert viewer.is_shown(node), node
     assert s.get_handle_by_name("/plan/local/samples").points.shape == (30 * 11, 2, 3)

@@ -47,6 +47,8 @@ log = logging.getLogger(__name__)
 PoseInputCallback = Callable[[str, Pose2D], None]
 POSE_KINDS = {"goal": "goal", "initial pose": "initial_pose"}
 
+HIDDEN_BY_DEFAULT = frozenset({"/costmap"})
+
 # Toggleable layers: checkbox label -> scene node it drives.
 LAYERS: dict[str, str] = {
     "Map": "/map",
@@ -273,7 +275,8 @@ class Viewer:
         h["/costmap"] = self.costmap_layer.root
         self._has_data = {name: False for name in LAYERS.values()}
         self._has_data["/robot/scan"] = True  # shown empty until a scan arrives
-        self._shown = {name: True for name in LAYERS.values()}
+        # Like Rviz's default displays: the costmap overlay starts hidden so the map stays readable.
+        self._shown = {name: name not in HIDDEN_BY_DEFAULT for name in LAYERS.values()}
         for name in LAYERS.values():
             self._refresh(name)
         s.on_click()(self._on_scene_click)
@@ -303,7 +306,7 @@ class Viewer:
             gui.add_markdown("Click: position. **Shift+drag** on the map: position and heading.")
         with gui.add_folder("Layers"):
             for label, node in LAYERS.items():
-                cb = gui.add_checkbox(label, True)
+                cb = gui.add_checkbox(label, LAYERS[label] not in HIDDEN_BY_DEFAULT)
                 self._checks[node] = cb
                 cb.on_update(lambda _ev, node=node: self._refresh(node))
 
