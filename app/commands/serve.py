@@ -51,7 +51,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"cannot start: {type(exc).__name__}: {exc}") from None
     if not settings.is_local:
         print(
-            f"WARNING: listening on {settings.host}: anyone who can reach this address can drive the robot.",
+            f"note: listening on {settings.host}: sign-in is required (add users with "
+            "'navdeck user add NAME --role operator'); put TLS in front (docs/deployment.md).",
             file=sys.stderr,
         )
     host = "127.0.0.1" if settings.host in ("0.0.0.0", "::") else settings.host
