@@ -19,6 +19,7 @@ import pytest
 from conftest import ARTIFACTS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
+from nav.types import Pose2D
 
 CHROMIUM = pathlib.Path("/usr/bin/chromium")
 ARGS = [
@@ -228,6 +229,20 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
     page.wait_for_selector("body[data-view-ready='1']", timeout=LONG)
     page.wait_for_timeout(2000)  # map tiles arrive and the camera aims at the map
     session = server.runtime.session
+    # Earlier tests in this module drove the robot around: put it back on open floor near the map's
+    # centre (where the camera looks), so this test is about the click reaching the navigator.
+    from scipy.ndimage import distance_transform_edt
+
+    world = session.driver.world
+    g = world.geometry
+    clearance = distance_transform_edt(~world.occupied) * g.resolution
+    rows, cols = np.indices(clearance.shape)
+    centre_r, centre_c = g.height / 2, g.width / 2
+    near_centre = np.hypot(rows - centre_r, cols - centre_c) * g.resolution < 2.0
+    r_best, c_best = np.unravel_index(np.argmax(np.where(near_centre, clearance, 0.0)), clearance.shape)
+    x, y = g.cell_to_world(np.array([r_best]), np.array([c_best]))[0]
+    session.driver.teleport(Pose2D(float(x), float(y), 0.0))
+    page.wait_for_timeout(500)
     # The operator tells AMCL where the robot is (Rviz's 2D Pose Estimate): here, the simulator's truth.
     truth = getattr(session.driver, "truth_pose", session.pose)
     r = page.request.post(
