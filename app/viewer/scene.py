@@ -494,6 +494,7 @@ class Viewer:
         cm_key = (id(cm), snap.extras.get("costmap_version"))
         if cm_key != self._last.get("costmap"):
             self._last["costmap"] = cm_key
+            self._last["costmap_ref"] = cm  # hold it: a freed object's id() can be reused by the next one
             present = isinstance(cm, Costmap)
             if present:
                 encoded += self.costmap_layer.update(cm.geometry, cm.costs)
