@@ -83,7 +83,7 @@ def test_base_telemetry_rate_and_unknown_message(pair: EmulatorPair) -> None:
         ser.write(seq.encode(Telemetry(0, 0, 0, 0, 0, 0.0, 0.0, 0.0, 0.0, 0, 0, 0)))  # wrong direction
         msgs = MessageDecoder().feed(read_for(ser, 1.0))
     telem = [m for m in msgs if isinstance(m, Telemetry)]
-    assert 40 <= len(telem) <= 55  # 50 Hz
+    assert 40 <= len(telem) <= 60  # 50 Hz over ~1 s, with slack for a late or early window edge
     us = np.array([t.mcu_us for t in telem])
     assert np.median(np.diff(us)) == pytest.approx(20_000, rel=0.1)
     errors = [m for m in msgs if isinstance(m, ErrorReport)]
