@@ -8,56 +8,18 @@ import math
 import numpy as np
 import pytest
 
+from bench.teb import corridor, omni_options, skid_options, straight_path
 from nav.control import ControllerError, InvalidPath, NoValidControl
 from nav.control.errors import PatienceExceeded
 from nav.control.teb import DistanceField, TebController, TebDebug
 from nav.control.teb_options import TebConfigError, TebOptions
-from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
+from nav.types import Costmap, Path, Pose2D, Twist2D, wrap_angle
 
-RES = 0.05
-SKID = ((0.12, 0.10), (-0.12, 0.10), (-0.12, -0.10), (0.12, -0.10))
 SKID_INSCRIBED = 0.10
-DIFF = TebOptions(
-    footprint=SKID,
-    max_vel_x=0.26,
-    max_vel_x_backwards=0.15,
-    max_vel_theta=1.0,
-    acc_lim_x=2.5,
-    acc_lim_theta=3.2,
-)
-OMNI = TebOptions(
-    holonomic=True,
-    robot_radius=0.25,
-    max_vel_x=1.5,
-    max_vel_x_backwards=1.5,
-    max_vel_y=1.5,
-    max_vel_theta=0.5,
-    acc_lim_x=1.0,
-    acc_lim_y=1.0,
-    acc_lim_theta=1.0,
-)
+DIFF = skid_options()
+OMNI = omni_options()
 INSCRIBED = {"diff": SKID_INSCRIBED, "omni": 0.25}
 KINDS = {"diff": DIFF, "omni": OMNI}
-
-
-def corridor(obstacle: tuple[float, float, float] | None = None, width: float = 2.0) -> Costmap:
-    """A 6 m corridor along +x from x = -0.5 with walls at y = +-width/2, optionally a round
-    obstacle (x, y, radius) of lethal cells."""
-    w, h = round(6.0 / RES), round(width / RES) + 4
-    geo = GridGeometry(RES, w, h, Pose2D(-0.5, -(h * RES) / 2, 0.0))
-    costs = np.zeros((h, w), np.uint8)
-    costs[:2, :] = costs[-2:, :] = LETHAL_OBSTACLE
-    if obstacle is not None:
-        rows, cols = np.indices((h, w))
-        xy = geo.cell_to_world(rows.ravel(), cols.ravel())
-        d = np.hypot(xy[:, 0] - obstacle[0], xy[:, 1] - obstacle[1]).reshape(h, w)
-        costs[d <= obstacle[2]] = LETHAL_OBSTACLE
-    return Costmap(geo, costs)
-
-
-def straight_path(length: float = 5.0, n: int = 101) -> Path:
-    xs = np.linspace(0.0, length, n)
-    return Path(np.column_stack((xs, np.zeros(n), np.zeros(n))))
 
 
 def integrate(p: Pose2D, c: Twist2D, dt: float) -> Pose2D:
@@ -269,6 +231,8 @@ def test_interface_errors() -> None:
         ({"max_samples": 1000}, "max_samples"),
         ({"holonomic": True, "max_vel_y": 0.0}, "max_vel_y"),
         ({"min_obstacle_dist": 0.5, "inflation_dist": 0.2}, "inflation_dist"),
+        ({"solver": "gauss_newton"}, "solver"),
+        ({"solver_ftol": 1.0}, "solver_ftol"),
     ],
 )
 def test_bad_options_name_the_field(kw: dict, field: str) -> None:

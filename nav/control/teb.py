@@ -9,22 +9,24 @@ behind the robot and extended to the new local goal), then optimized:
 
     B* = argmin_B sum_k gamma_k f_k(B)
 
-with scipy's trust-region least squares. Every term is a residual whose square is TEB's penalty
-e(x, x_r, eps, S, n=2) = ((x - (x_r - eps)) / S)^2 when x > x_r - eps: distance to the global path
-(via-points), obstacle clearance below ``min_obstacle_dist`` / ``inflation_dist`` (from a signed
-distance field of the local costmap's lethal cells, sampled bilinearly), each dT_i (time-optimal),
-|v|, |w|, |a| limits, and the differential drive's non-holonomic and forward-drive constraints (TEB's
-EdgeKinematicsDiffDrive; omni bases drop them and get a lateral-velocity limit instead, source C's
-kinematics). Each residual touches at most three consecutive poses and two intervals, so the
-Jacobian is banded: it is computed by finite differences over ``jac_sparsity`` (scipy colours the
-columns, ~12 residual evaluations per Jacobian instead of one per variable) and the trust-region
-steps use LSMR on the sparse matrix.
+with a Levenberg-Marquardt on banded normal equations (``nav.control.teb_optim``; ``solver =
+"scipy"`` runs ``scipy.optimize.least_squares`` on the same problem instead). Every term is a
+residual whose square is TEB's penalty e(x, x_r, eps, S, n=2) = ((x - (x_r - eps)) / S)^2 when
+x > x_r - eps: distance to the global path (via-points), obstacle clearance below
+``min_obstacle_dist`` / ``inflation_dist`` (from a signed distance field of the local costmap's
+lethal cells, sampled bilinearly), each dT_i (time-optimal), |v|, |w|, |a| limits, and the
+differential drive's non-holonomic and forward-drive constraints (TEB's EdgeKinematicsDiffDrive;
+omni bases drop them and get a lateral-velocity limit instead, source C's kinematics). Each
+residual touches at most three consecutive poses and two intervals, so with the variables in pose
+order J^T J is a band matrix: each iteration is one analytic residual + Jacobian evaluation and
+one banded Cholesky solve, O(n).
 
 TEB escapes a blocking obstacle by exploring homotopy classes; navdeck seeds a single band on the
-side of least detour instead: band poses that start inside an obstacle are pushed sideways along
-the path's normal before optimizing. The command sent is the band's first segment, v = body-frame
-displacement / dT_0 and w = (beta_1 - beta_0) / dT_0, after footprint-checking the first
-``feasibility_check_no_poses`` poses against the costmap (TEB's ``isTrajectoryFeasible``).
+side of least detour instead: band poses that start closer to an obstacle than
+``min_obstacle_dist`` are pushed sideways along the path's normal before optimizing. The command
+sent is the band's first segment, v = body-frame displacement / dT_0 and w = (beta_1 - beta_0) /
+dT_0, after footprint-checking the first ``feasibility_check_no_poses`` poses against the costmap
+(TEB's ``isTrajectoryFeasible``).
 """
 
 from __future__ import annotations
@@ -35,10 +37,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import ndimage
-from scipy.optimize import least_squares
-from scipy.sparse import coo_matrix, csr_matrix
 
 from nav.control.errors import ControllerError, InvalidPath, NoValidControl, PatienceExceeded
+from nav.control.teb_optim import (
+    BandProblem,
+    BandStructure,
+    SolveResult,
+    evaluate,
+    pack,
+    solve_lm_banded,
+    solve_scipy,
+    unpack,
+)
 from nav.control.teb_options import TebOptions
 from nav.costmap.footprint import circle_footprint, footprint_cost
 from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, Costmap, Path, Pose2D, Twist2D, wrap_angle
@@ -67,24 +77,39 @@ class DistanceField:
                 self.field = np.full(costmap.costs.shape, -_FAR)
             else:
                 self.field = np.where(lethal, -(inside - 0.5 * res), outside - 0.5 * res)
-        self._inv = g.origin.inverse() if g.origin.theta != 0.0 else None
+        # bilinear patch of every cell [j, i] .. [j+1, i+1] as f = a + b fu + c fv + d fu fv, so a
+        # lookup with its gradient is one gather of 4 coefficients
+        f = self.field
+        if f.shape[0] < 2 or f.shape[1] < 2:
+            f = np.pad(f, ((0, max(2 - f.shape[0], 0)), (0, max(2 - f.shape[1], 0))), mode="edge")
+        f00, f01, f10, f11 = f[:-1, :-1], f[:-1, 1:], f[1:, :-1], f[1:, 1:]
+        self._coef = np.stack((f00, f01 - f00, f10 - f00, f11 - f10 - f01 + f00), axis=-1).reshape(-1, 4)
+        self._cells = (f.shape[1] - 1, f.shape[0] - 1)  # patches per row, per column
+        self._uv_hi = np.array(self._cells, dtype=float)
+        self._cell_hi = np.array(self._cells) - 1
+        # world (x, y) -> continuous cell-centre coordinates (u, v) = xy @ to_uv + uv0
+        co, si = math.cos(g.origin.theta), math.sin(g.origin.theta)
+        self._to_uv = np.array([[co, -si], [si, co]]) / res
+        self._uv0 = -np.array([g.origin.x, g.origin.y]) @ self._to_uv - 0.5
 
     def __call__(self, xy: np.ndarray) -> np.ndarray:
         """Distances at (M, 2) world points; points off the grid read the nearest edge cell."""
-        g = self.geometry
-        xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        local = self._inv.transform_points(xy) if self._inv is not None else xy - (g.origin.x, g.origin.y)
-        f = self.field
-        h, w = f.shape
-        u = np.clip(local[:, 0] / g.resolution - 0.5, 0.0, w - 1.0)
-        v = np.clip(local[:, 1] / g.resolution - 0.5, 0.0, h - 1.0)
-        i0 = np.minimum(np.floor(u).astype(np.int64), max(w - 2, 0))
-        j0 = np.minimum(np.floor(v).astype(np.int64), max(h - 2, 0))
-        i1, j1 = np.minimum(i0 + 1, w - 1), np.minimum(j0 + 1, h - 1)
-        fu, fv = u - i0, v - j0
-        top = f[j0, i0] * (1 - fu) + f[j0, i1] * fu
-        bot = f[j1, i0] * (1 - fu) + f[j1, i1] * fu
-        return top * (1 - fv) + bot * fv
+        return self.sample(xy, gradient=False)[0]
+
+    def sample(self, xy: np.ndarray, gradient: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """(distances (M,), gradients (M, 2) in the world frame) of the bilinear interpolant between
+        cell centres at (M, 2) world points: the exact derivative the optimizer's Jacobian needs
+        (zero across the grid's edge, where the lookup is clamped; empty without ``gradient``)."""
+        uv = np.asarray(xy, dtype=float).reshape(-1, 2) @ self._to_uv + self._uv0
+        clamped = np.clip(uv, 0.0, self._uv_hi)
+        cell = np.minimum(clamped.astype(np.int64), self._cell_hi)
+        fu, fv = (clamped - cell).T
+        a, b, c, d = self._coef[cell[:, 1] * self._cells[0] + cell[:, 0]].T
+        dist = a + b * fu + (c + d * fu) * fv
+        if not gradient:
+            return dist, np.zeros((0, 2))
+        grad = (np.column_stack((b + d * fv, c + d * fu)) * (uv == clamped)) @ self._to_uv.T
+        return dist, grad
 
 
 @dataclass(frozen=True)
@@ -95,7 +120,7 @@ class TebDebug:
     dts: np.ndarray  # (N-1,) time intervals, s
     local_goal: np.ndarray  # (3,) the band's fixed end pose
     warm_started: bool = False
-    nfev: int = 0  # residual evaluations by the solver (not counting the Jacobian's)
+    nfev: int = 0  # residual evaluations by the solver (lm_banded: each with its Jacobian)
     njev: int = 0  # Jacobian evaluations
     cost: float = 0.0  # final 0.5 * sum(residual^2)
     solve_time: float = 0.0  # wall time of the optimization, s
@@ -124,17 +149,6 @@ def segment_velocities(poses: np.ndarray, dts: np.ndarray) -> np.ndarray:
     return np.column_stack((vx, vy, w))
 
 
-def _bound(x: np.ndarray, lo: float, hi: float, eps: float) -> np.ndarray:
-    """TEB's ``penaltyBoundToInterval`` with source C's scale S = eps: how far ``x`` lies outside
-    [lo + eps, hi - eps], in units of the margin eps. Measuring the violation relative to the margin
-    keeps the limits tight whatever their magnitude (0.26 m/s or 1.5 m/s) against the time term."""
-    return (np.maximum(x - (hi - eps), 0.0) + np.maximum((lo + eps) - x, 0.0)) / max(eps, 1e-6)
-
-
-def _eps(o: TebOptions, limit: float) -> float:
-    return min(o.penalty_epsilon, 0.1 * limit)
-
-
 def _nearest_segments(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Index of the polyline segment (a[k] -> b[k]) nearest to each of (M, 2) points."""
     ab = b - a
@@ -143,17 +157,6 @@ def _nearest_segments(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarr
     t = np.clip(np.einsum("mki,ki->mk", ap, ab) / len2, 0.0, 1.0)
     diff = ap - t[..., None] * ab[None, :, :]
     return np.argmin(np.einsum("mki,mki->mk", diff, diff), axis=1)
-
-
-def _segment_distance(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance from each of (..., K, 2) points to its own candidate segments (..., K, C, 2),
-    minimised over the C candidates."""
-    ab = b - a
-    len2 = np.maximum(np.sum(ab * ab, axis=-1), 1e-12)
-    ap = pts[..., None, :] - a
-    t = np.clip(np.sum(ap * ab, axis=-1) / len2, 0.0, 1.0)
-    diff = ap - t[..., None] * ab
-    return np.sqrt(np.min(np.sum(diff * diff, axis=-1), axis=-1))
 
 
 def _resample(xy: np.ndarray, theta: np.ndarray, t: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
@@ -187,10 +190,7 @@ class TebController:
         self._band: np.ndarray | None = None
         self._dts: np.ndarray | None = None
         self._fail_cycles = 0
-        self._sparsity: dict[tuple[int, bool, bool], csr_matrix] = {}
-        self._colours: dict[
-            tuple[int, bool, bool], tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]
-        ] = {}
+        self._structures: dict[tuple[int, bool], BandStructure] = {}
         self.last_debug: TebDebug | None = None
 
     # -- path -------------------------------------------------------------------------------------
@@ -249,21 +249,35 @@ class TebController:
 
     def _segment_times(self, poses: np.ndarray, v0: float = -1.0, stop: bool = False) -> np.ndarray:
         """Time each segment needs (the band's initial dT): the speed limit, or with ``v0 >= 0`` an
-        acceleration-limited profile from speed ``v0`` (and to rest at the end when ``stop``),
-        v(s) = min(v_max, sqrt(v0^2 + 2 a s), sqrt(2 a (S - s))); never faster than the turn
-        rate allows. Starting the optimizer from a consistent timing saves most of its iterations."""
+        acceleration-limited profile through speed caps c_j at arc lengths s_j (``v0`` at the start,
+        0 at the end when ``stop``, and for omni bases sqrt(a ds / (2 sin(dphi / 2))) where the
+        direction of travel turns by dphi: the body-frame acceleration of going round the corner),
+        v(s) = min(v_max, min_j sqrt(c_j^2 + 2 a |s - s_j|)); never faster than the turn rate
+        allows. Starting the optimizer from a consistent timing saves most of its iterations."""
         o = self.options
         vmax = max(o.max_vel_x, o.max_vel_y) if o.holonomic else o.max_vel_x
         acc = min(o.acc_lim_x, o.acc_lim_y) if o.holonomic else o.acc_lim_x
-        dist = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+        d = np.diff(poses[:, :2], axis=0)
+        dist = np.hypot(d[:, 0], d[:, 1])
         turn = np.abs(wrap_angle(np.diff(poses[:, 2])))
         if v0 < 0:
             t = dist / vmax
         else:
             s = np.concatenate(([0.0], np.cumsum(dist)))
-            v = np.minimum(vmax, np.sqrt(min(v0, vmax) ** 2 + 2.0 * acc * s))
+            caps_s, caps_v = [np.array([0.0])], [np.array([min(v0, vmax)])]
             if stop:
-                v = np.minimum(v, np.sqrt(2.0 * acc * (s[-1] - s)))
+                caps_s.append(s[-1:])
+                caps_v.append(np.zeros(1))
+            if o.holonomic and len(dist) > 1:
+                heading = np.arctan2(d[:, 1], d[:, 0])
+                bend = np.abs(wrap_angle(np.diff(heading)))
+                moving = (dist[:-1] > 1e-6) & (dist[1:] > 1e-6) & (bend > 1e-3)
+                ds = 0.5 * (dist[:-1] + dist[1:])
+                caps_s.append(s[1:-1][moving])
+                caps_v.append(np.sqrt(0.9 * acc * ds[moving] / (2.0 * np.sin(0.5 * bend[moving]))))
+            cs, cv = np.concatenate(caps_s), np.concatenate(caps_v)
+            v = np.sqrt(cv[None, :] ** 2 + 2.0 * acc * np.abs(s[:, None] - cs[None, :])).min(axis=1)
+            v = np.minimum(v, vmax)
             t = 2.0 * dist / np.maximum(v[:-1] + v[1:], 1e-3)
         return np.maximum(np.maximum(t, turn / o.max_vel_theta), 0.02)
 
@@ -316,15 +330,17 @@ class TebController:
         return poses, dts, warm
 
     def _push_out(self, poses: np.ndarray, dfield: DistanceField) -> None:
-        """Homotopy seed: move interior poses that sit inside an obstacle sideways (along the band's
-        normal) to the nearest clear offset, every run of such poses to the same side, the side with
-        the smaller detour (left on a tie). In place."""
+        """Homotopy seed: move interior poses within ``min_obstacle_dist`` of an obstacle sideways
+        (along the band's normal) to the nearest offset with that clearance, every run of such poses
+        to the same side, the side with the smaller detour (left on a tie). In place. Pushing the
+        near-miss poses too, not only colliding ones, starts the optimizer out of the obstacle
+        penalty's steep part."""
         o = self.options
         need = self._radius + o.min_obstacle_dist
         inner = poses[1:-1, :2]
         if len(inner) == 0:
             return
-        blocked = dfield(inner) < self._radius
+        blocked = dfield(inner) < need
         if not blocked.any():
             return
         tangent = np.gradient(poses[:, :2], axis=0)[1:-1]
@@ -351,173 +367,6 @@ class TebController:
             poses[1:-1, 2] = poses[1:-1, 2] + wrap_angle(chord[1:] - poses[1:-1, 2])
 
     # -- optimization ---------------------------------------------------------------------------------
-    def _jac_sparsity(self, n: int, start_acc: bool, goal_acc: bool) -> csr_matrix:
-        """Banded structure of the residuals' Jacobian (rows as in ``_residuals``)."""
-        key = (n, start_acc, goal_acc)
-        if key in self._sparsity:
-            return self._sparsity[key]
-        o = self.options
-        m = n - 2
-        rows: list[np.ndarray] = []
-        cols: list[np.ndarray] = []
-        row = 0
-
-        def pose_cols(k: np.ndarray) -> list[np.ndarray]:
-            inner = (k >= 1) & (k <= n - 2)
-            return [np.where(inner, 3 * (k - 1) + c, -1) for c in range(3)]
-
-        def dt_cols(j: np.ndarray) -> np.ndarray:
-            return 3 * m + j
-
-        def add(count: int, deps: list[np.ndarray]) -> None:
-            nonlocal row
-            r = row + np.arange(count)
-            for d in deps:
-                d = np.broadcast_to(d, (count,))
-                ok = d >= 0
-                rows.append(r[ok])
-                cols.append(d[ok])
-            row += count
-
-        k_in = np.arange(1, n - 1)
-        seg = np.arange(n - 1)
-        blocks_per_pose = 3  # path, obstacle, inflation
-        for _ in range(blocks_per_pose):
-            add(m, pose_cols(k_in))
-        add(n - 1, [dt_cols(seg)])  # time
-        n_vel = 3 if o.holonomic else 2
-        for _ in range(n_vel):
-            add(n - 1, [*pose_cols(seg), *pose_cols(seg + 1), dt_cols(seg)])
-        n_acc = 3 if o.holonomic else 2
-        j = np.arange(n - 2)
-        for _ in range(n_acc):
-            add(n - 2, [*pose_cols(j), *pose_cols(j + 1), *pose_cols(j + 2), dt_cols(j), dt_cols(j + 1)])
-            if start_acc:
-                add(1, [*pose_cols(np.array([0])), *pose_cols(np.array([1])), dt_cols(np.array([0]))])
-            if goal_acc:
-                add(
-                    1,
-                    [
-                        *pose_cols(np.array([n - 2])),
-                        *pose_cols(np.array([n - 1])),
-                        dt_cols(np.array([n - 2])),
-                    ],
-                )
-        if not o.holonomic:
-            for _ in range(2 + (o.min_turning_radius > 0)):
-                add(n - 1, [*pose_cols(seg), *pose_cols(seg + 1), dt_cols(seg)])
-        r = np.concatenate(rows)
-        c = np.concatenate(cols)
-        mat = coo_matrix((np.ones(len(r)), (r, c)), shape=(row, 3 * m + n - 1)).tocsr()
-        mat.data[:] = 1.0
-        self._sparsity[key] = mat
-        return mat
-
-    def _residuals(
-        self,
-        z: np.ndarray,
-        ends: np.ndarray,
-        ref_a: np.ndarray,
-        ref_b: np.ndarray,
-        dfield: DistanceField,
-        v0: np.ndarray,
-        goal_acc: bool,
-    ) -> np.ndarray:
-        """All weighted residuals of a batch of bands ``z`` (B, interior poses then dT) -> (B, R),
-        TEB's edges in the row order of ``_jac_sparsity``. Batched so the finite-difference
-        Jacobian costs one vectorized call instead of one call per column group."""
-        o = self.options
-        bsz, nvar = z.shape
-        n = (nvar + 7) // 4  # 3 (n-2) + (n-1) = 4n - 7 variables
-        m = n - 2
-        poses = np.empty((bsz, n, 3))
-        poses[:, 0], poses[:, -1] = ends
-        poses[:, 1:-1] = z[:, : 3 * m].reshape(bsz, m, 3)
-        dts = z[:, 3 * m :]
-        inner = poses[:, 1:-1, :2].reshape(-1, 2)
-        out: list[np.ndarray] = []
-        # via-points: stay near the global path (each pose against the path segments around the one
-        # it was nearest to at the start of this optimization)
-        inner_b = poses[:, 1:-1, :2]
-        out.append(math.sqrt(o.weight_viapoint) * _segment_distance(inner_b, ref_a, ref_b))
-        # obstacles: clearance of the footprint circle
-        clear = dfield(inner).reshape(bsz, m) - self._radius
-        # (scaled by S = min_obstacle_dist like the limits: intrusion relative to the margin)
-        scale = max(o.min_obstacle_dist, 0.05)
-        out.append(math.sqrt(o.weight_obstacle) * np.maximum(o.min_obstacle_dist + 0.01 - clear, 0.0) / scale)
-        out.append(math.sqrt(o.weight_inflation) * np.maximum(o.inflation_dist - clear, 0.0) / scale)
-        # time optimal (TEB EdgeTimeOptimal: one residual per interval)
-        out.append(math.sqrt(o.weight_optimaltime) * dts)
-        # velocities in each segment's start frame
-        d = np.diff(poses[..., :2], axis=1)
-        c, s = np.cos(poses[..., 2]), np.sin(poses[..., 2])
-        fwd = d[..., 0] * c[:, :-1] + d[..., 1] * s[:, :-1]
-        vel = np.stack(
-            (
-                fwd / dts,
-                (-d[..., 0] * s[:, :-1] + d[..., 1] * c[:, :-1]) / dts,
-                wrap_angle(np.diff(poses[..., 2], axis=1)) / dts,
-            ),
-            axis=-1,
-        )
-        lim_x = (-o.max_vel_x_backwards, o.max_vel_x, _eps(o, o.max_vel_x))
-        out.append(math.sqrt(o.weight_max_vel_x) * _bound(vel[..., 0], *lim_x))
-        if o.holonomic:
-            lim_y = (-o.max_vel_y, o.max_vel_y, _eps(o, o.max_vel_y))
-            out.append(math.sqrt(o.weight_max_vel_y) * _bound(vel[..., 1], *lim_y))
-        lim_w = (-o.max_vel_theta, o.max_vel_theta, _eps(o, o.max_vel_theta))
-        out.append(math.sqrt(o.weight_max_vel_theta) * _bound(vel[..., 2], *lim_w))
-        # accelerations, including from the measured velocity and (at the final goal) to rest
-        axes = [(0, o.acc_lim_x, o.weight_acc_lim_x)]
-        if o.holonomic:
-            axes.append((1, o.acc_lim_y, o.weight_acc_lim_y))
-        axes.append((2, o.acc_lim_theta, o.weight_acc_lim_theta))
-        mid = dts[:, :-1] + dts[:, 1:]
-        for axis, lim, weight in axes:
-            v = vel[..., axis]
-            parts = [2.0 * np.diff(v, axis=1) / mid, (v[:, :1] - v0[axis]) / dts[:, :1]]
-            if goal_acc:
-                parts.append(-v[:, -1:] / dts[:, -1:])
-            a = np.concatenate(parts, axis=1)
-            out.append(math.sqrt(weight) * _bound(a, -lim, lim, _eps(o, lim)))
-        if not o.holonomic:
-            # TEB EdgeKinematicsDiffDrive: both headings make equal angles with the chord
-            nh = (c[:, :-1] + c[:, 1:]) * d[..., 1] - (s[:, :-1] + s[:, 1:]) * d[..., 0]
-            out.append(math.sqrt(o.weight_kinematics_nh) * nh)
-            out.append(math.sqrt(o.weight_kinematics_forward_drive) * np.maximum(-fwd, 0.0))
-            if o.min_turning_radius > 0:
-                dist = np.hypot(d[..., 0], d[..., 1])
-                turn = np.abs(wrap_angle(np.diff(poses[..., 2], axis=1)))
-                out.append(
-                    math.sqrt(o.weight_kinematics_turning_radius)
-                    * np.maximum(o.min_turning_radius * turn - dist, 0.0)
-                )
-        return np.concatenate(out, axis=1)
-
-    def _colouring(self, sparsity: csr_matrix) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """Greedy column colouring (columns sharing no residual share a finite-difference step),
-        returned as (group of each column, number of groups, CSR rows, CSR columns). Computed once
-        per band size."""
-        csc = sparsity.tocsc()
-        ncol = csc.shape[1]
-        group = np.full(ncol, -1, dtype=np.int64)
-        used: list[np.ndarray] = []
-        for col in range(ncol):
-            rows = csc.indices[csc.indptr[col] : csc.indptr[col + 1]]
-            for g, mask in enumerate(used):
-                if not mask[rows].any():
-                    group[col] = g
-                    mask[rows] = True
-                    break
-            else:
-                mask = np.zeros(csc.shape[0], dtype=bool)
-                mask[rows] = True
-                used.append(mask)
-                group[col] = len(used) - 1
-        coo = sparsity.tocoo()
-        order = np.lexsort((coo.col, coo.row))
-        return group, np.array(len(used)), coo.row[order], coo.col[order]
-
     def optimize(
         self,
         poses: np.ndarray,
@@ -526,57 +375,33 @@ class TebController:
         dfield: DistanceField,
         v0: np.ndarray,
         goal_acc: bool,
-    ) -> tuple[np.ndarray, np.ndarray, object]:
-        """Optimize a band with fixed end poses with ``scipy.optimize.least_squares`` (trust region,
-        sparse Jacobian); returns (poses, dts, scipy result)."""
+    ) -> tuple[np.ndarray, np.ndarray, SolveResult]:
+        """Optimize a band with fixed end poses with ``options.solver``; returns (poses, dts, result)."""
         o = self.options
         n = len(poses)
-        m = n - 2
         ends = np.stack((poses[0], poses[-1]))
         ref_xy = ref[:, :2] if len(ref) > 1 else np.vstack((ref[:1, :2], ref[:1, :2]))
         seg_a, seg_b = ref_xy[:-1], ref_xy[1:]
         near = _nearest_segments(poses[1:-1, :2], seg_a, seg_b)
         cand = np.clip(near[:, None] + np.arange(-1, 2)[None, :], 0, len(seg_a) - 1)  # (m, 3)
-        args = (ends, seg_a[cand], seg_b[cand], dfield, v0, goal_acc)
-        key = (n, True, goal_acc)
-        sparsity = self._jac_sparsity(*key)
-        if key not in self._colours:
-            self._colours[key] = self._colouring(sparsity)
-        group, n_groups, jrows, jcols = self._colours[key]
-        ngroups = int(n_groups)
-        indptr = np.concatenate(([0], np.cumsum(np.bincount(jrows, minlength=sparsity.shape[0]))))
+        problem = BandProblem(ends, seg_a[cand], seg_b[cand], dfield.sample, v0, goal_acc)
+        key = (n, goal_acc)
+        if key not in self._structures:
+            self._structures[key] = BandStructure(n, o, goal_acc)
+        st = self._structures[key]
 
-        def fun(z: np.ndarray) -> np.ndarray:
-            return self._residuals(z[None, :], *args)[0]
+        def fn(z: np.ndarray) -> tuple[np.ndarray, list[np.ndarray]]:
+            return evaluate(z, problem, o, st, self._radius)
 
-        def jac(z: np.ndarray) -> csr_matrix:
-            h = 1.49e-8 * np.maximum(1.0, np.abs(z))
-            batch = np.repeat(z[None, :], ngroups + 1, axis=0)
-            batch[1 + group, np.arange(len(z))] += h
-            f = self._residuals(batch, *args)
-            data = (f[1 + group[jcols], jrows] - f[0, jrows]) / h[jcols]
-            return csr_matrix((data, jcols, indptr), shape=sparsity.shape)
-
-        x0 = np.concatenate((poses[1:-1].ravel(), np.maximum(dts, 0.011)))
-        lb = np.concatenate((np.full(3 * m, -np.inf), np.full(n - 1, 0.01)))
-        ub = np.full(3 * m + n - 1, np.inf)
-        res = least_squares(
-            fun,
-            x0,
-            jac=jac,
-            bounds=(lb, ub),
-            method="trf",
-            tr_solver="lsmr",
-            x_scale=1.0,
-            tr_options={"maxiter": 15},
-            max_nfev=o.no_inner_iterations * o.no_outer_iterations,
-            xtol=1e-6,
-            ftol=1e-6,
-        )
-        out = poses.copy()
-        out[1:-1] = res.x[: 3 * m].reshape(m, 3)
+        budget = o.no_inner_iterations * o.no_outer_iterations
+        z0 = pack(poses, dts)
+        if o.solver == "scipy":
+            res = solve_scipy(z0, fn, st, budget, o.solver_ftol)
+        else:
+            res = solve_lm_banded(z0, fn, st, budget, o.solver_ftol)
+        out, out_dts = unpack(res.z, ends)
         out[:, 2] = wrap_angle(out[:, 2])
-        return out, res.x[3 * m :].copy(), res
+        return out, out_dts, res
 
     # -- control ----------------------------------------------------------------------------------------
     def _choose_goal(self, local: np.ndarray, dfield: DistanceField) -> np.ndarray:
