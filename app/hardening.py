@@ -19,11 +19,18 @@ app.security) and routes added later by other modules.
   hijacking). An upgrade whose Origin is not this server's own Host (or listed in
   ``NAVDECK_ALLOWED_ORIGINS``) is refused with 403. Clients that send no Origin (scripts, the load tool)
   are not browsers and are left to sign-in.
+- Non-finite numbers (RFC 8259 has none): Python's JSON parser accepts ``NaN``, ``Infinity`` and
+  ``-Infinity`` and turns ``1e999`` into inf, and a model field or a plain ``dict`` body would pass them
+  on to poses and speeds. Every JSON body (under ``max_body_bytes``, so buffering it is cheap) is checked
+  here once for all routes, present and future: such a number anywhere is a 422 naming its field.
 """
 
 from __future__ import annotations
 
+import json
+import math
 import os
+import re
 from collections.abc import Awaitable, Callable, Iterable
 from typing import Any
 from urllib.parse import urlsplit
@@ -101,6 +108,47 @@ def origin_allowed(origin: str | None, host: str | None, extra: Iterable[str] = 
     return bool(netloc) and netloc == host.strip().lower()
 
 
+class _NonFinite(float):
+    """A non-finite number as parsed, remembering how the request wrote it."""
+
+    text: str
+
+    def __new__(cls, text: str) -> _NonFinite:
+        obj = super().__new__(cls, float(text))
+        obj.text = text
+        return obj
+
+
+def _parse_float(text: str) -> float:
+    value = float(text)
+    return value if math.isfinite(value) else _NonFinite(text)
+
+
+_MAYBE_NON_FINITE = re.compile(rb"NaN|Infinity|[0-9][eE]\+?[0-9]{3}")
+
+
+def non_finite_field(body: bytes) -> str | None:
+    """``"field: message"`` for the first non-finite number in a JSON body, or None (also for bodies that
+    are not JSON at all: the route's own parser answers those). A byte scan skips the parse for almost
+    every body: only ``NaN``, ``Infinity`` or a 3-digit exponent can make one."""
+    if not _MAYBE_NON_FINITE.search(body):
+        return None
+    try:
+        doc = json.loads(body, parse_constant=_NonFinite, parse_float=_parse_float)
+    except (ValueError, RecursionError):
+        return None
+    stack: list[tuple[str, object]] = [("", doc)]
+    while stack:
+        where, v = stack.pop()
+        if isinstance(v, _NonFinite):
+            return f"{where or 'body'}: non-finite number {v.text} is not allowed"
+        if isinstance(v, dict):
+            stack.extend((f"{where}.{k}" if where else str(k), x) for k, x in reversed(list(v.items())))
+        elif isinstance(v, list):
+            stack.extend((f"{where}.{i}" if where else str(i), x) for i, x in reversed(list(enumerate(v))))
+    return None
+
+
 class RequestTooLarge(HTTPException):
     """The streamed request body passed its limit. An HTTPException so that FastAPI's body parsing
     re-raises it as is (it turns other errors into 400) and the app answers 413."""
@@ -168,18 +216,55 @@ class HardeningMiddleware:
                 msg = {**msg, "headers": [*msg.get("headers", ()), *added]}
             await send(msg)
 
+        inner_receive = limited_receive
+        ctype = (_header(scope, b"content-type") or "").lower()
+        if scope.get("method") in ("POST", "PUT", "PATCH", "DELETE") and not ctype.startswith(
+            ("multipart/", "application/x-www-form-urlencoded")
+        ):
+            # JSON (or untyped) body: read it whole (it is <= max_body_bytes), refuse non-finite numbers,
+            # then hand the same bytes to the app.
+            chunks: list[bytes] = []
+            try:
+                while True:
+                    msg = await limited_receive()
+                    if msg["type"] != "http.request":
+                        break
+                    chunks.append(msg.get("body", b""))
+                    if not msg.get("more_body", False):
+                        break
+            except RequestTooLarge:
+                await _reject(send_with_headers, 413, f"request body larger than {limit} bytes")
+                return
+            body = b"".join(chunks)
+            problem = non_finite_field(body)
+            if problem is not None:
+                field_name, _, message = problem.partition(": ")
+                await _reject(
+                    send_with_headers, 422, problem, errors=[{"field": field_name, "message": message}]
+                )
+                return
+            replayed = False
+
+            async def inner_receive() -> Message:
+                nonlocal replayed
+                if not replayed:
+                    replayed = True
+                    return {"type": "http.request", "body": body, "more_body": False}
+                return await receive()
+
         try:
-            await self.app(scope, limited_receive, send_with_headers)
+            await self.app(scope, inner_receive, send_with_headers)
         except RequestTooLarge:
             if started:
                 raise
             await _reject(send_with_headers, 413, f"request body larger than {limit} bytes")
 
 
-async def _reject(send: Send, status: int, detail: str) -> None:
-    import json
-
-    body = json.dumps({"detail": detail}).encode()
+async def _reject(send: Send, status: int, detail: str, errors: list[dict] | None = None) -> None:
+    payload: dict[str, Any] = {"detail": detail}
+    if errors is not None:
+        payload["errors"] = errors  # the app's 422 shape (app.main: detail + field errors)
+    body = json.dumps(payload).encode()
     headers = [
         (b"content-type", b"application/json"),
         (b"content-length", str(len(body)).encode()),

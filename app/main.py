@@ -120,6 +120,9 @@ def create_app(runtime: Runtime) -> FastAPI:
         app.include_router(module.router)
 
     _document_validation_errors(app)
+    from app.ratelimit import document_rate_limits
+
+    document_rate_limits(app)  # 429 on the control endpoints (limited in app.security)
 
     from app.viewer.relay import make_router
 

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 from sqlalchemy.engine import Engine
+from sqlalchemy.exc import IntegrityError
 from sqlmodel import Session, select
 
 from app.models import MapRecord, utcnow
@@ -163,9 +164,19 @@ class MapStore:
             return True
 
     def register_stock(self, worlds: dict[str, Path], load) -> list[MapInfo]:
-        """Register each stock world once (by name), loading it with ``load(path) -> OccupancyGrid``."""
+        """Register each stock world once (by name), loading it with ``load(path) -> OccupancyGrid``.
+
+        Race-safe for a fleet starting at once on one PostgreSQL: the partial unique index
+        ``uq_maps_stock_name`` lets exactly one insert per name commit; a process that loses the race
+        gets an IntegrityError (its transaction rolled back, nothing half-written) and keeps the
+        winner's row."""
         added = []
         for name, path in worlds.items():
-            if self.find(name, stock=True) is None:
+            if self.find(name, stock=True) is not None:
+                continue
+            try:
                 added.append(self.add(name, load(path), source="stock", is_stock=True))
+            except IntegrityError:
+                if self.find(name, stock=True) is None:  # a different constraint failed: not the race
+                    raise
         return added

@@ -5,7 +5,7 @@ from __future__ import annotations
 from datetime import UTC, datetime
 from typing import Any
 
-from sqlalchemy import JSON, Column, Index, LargeBinary
+from sqlalchemy import JSON, Column, Index, LargeBinary, text
 from sqlmodel import Field, SQLModel
 
 
@@ -30,6 +30,16 @@ class MapRecord(SQLModel, table=True):
     """An occupancy grid map: nav_msgs/OccupancyGrid values stored zlib-compressed (int8 row-major)."""
 
     __tablename__ = "maps"
+    # One row per stock world: fleet processes starting at once race to register them (migration 0004).
+    __table_args__ = (
+        Index(
+            "uq_maps_stock_name",
+            "name",
+            unique=True,
+            sqlite_where=text("is_stock"),
+            postgresql_where=text("is_stock"),
+        ),
+    )
     id: int | None = Field(default=None, primary_key=True)
     name: str = Field(index=True, max_length=200)
     resolution: float

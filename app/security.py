@@ -28,6 +28,7 @@ from urllib.parse import quote
 from app.auth import CLIENT_COOKIE, SESSION_COOKIE, LoginThrottle, Principal, Role, UserStore, token_digest
 from app.control import ControlLease
 from app.modes import Mode, TransitionRefused
+from app.ratelimit import RateLimiter, is_limited
 
 log = logging.getLogger("navdeck.security")
 
@@ -276,10 +277,13 @@ def _is_page(path: str) -> bool:
 class SecurityMiddleware:
     """Resolve the caller (cookies), apply ``POLICY``, keep lease presence, set the client cookie."""
 
-    def __init__(self, app: ASGIApp, *, auth: AuthContext, guard: LeaseGuard) -> None:
+    def __init__(
+        self, app: ASGIApp, *, auth: AuthContext, guard: LeaseGuard, limiter: RateLimiter | None = None
+    ) -> None:
         self.app = app
         self.auth = auth
         self.guard = guard
+        self.limiter = limiter or RateLimiter()  # control endpoints (app/ratelimit.py); never the e-stop
         self.secure = "; Secure" if auth.secure_cookies else ""
 
     def resolve(self, scope: Scope) -> tuple[Principal | None, str | None]:
@@ -339,6 +343,15 @@ class SecurityMiddleware:
         if principal is not None:
             self.guard.touch(principal.client_id)
         refusal = self._refusal(need, method, path, principal, scope)
+        if refusal is None and principal is not None and is_limited(method, path):
+            wait = self.limiter.take(principal.client_id, _client_addr(scope))
+            if wait > 0:
+                after = self.limiter.retry_after(wait)
+                detail = (
+                    f"too many control requests: {self.limiter.rate:g} per second "
+                    f"(bursts of {self.limiter.burst:g}); retry in {after} s"
+                )
+                refusal = 429, {"detail": detail}, [(b"retry-after", str(after).encode())]
         if refusal is not None:
             status, body, headers = refusal
             await _respond(send, status, body, headers)

@@ -1,8 +1,11 @@
 """Load and soak benchmarks (issue 9 part 4), group ``load``: ``navdeck bench load``.
 
 ``load.viewers``: 50 telemetry viewers + REST polling at 5 Hz each + a teleop driver + a stalled client
-against a real server process. ``load.soak``: the same for ``NAVDECK_SOAK_MINUTES`` (default 3; the
-issue's 30-minute soak is ``python -m bench.load --minutes 30``), reporting RSS growth after warm-up.
+against a real server process. ``load.soak``: the same for ``NAVDECK_SOAK_MINUTES`` (default 3) with
+``NAVDECK_SOAK_VIEWERS`` clients (default 50), RSS sampled every 30 s (every tenth of the run when
+shorter) after a warm-up (2 min, 30 s for runs under 10 min), reporting the growth after warm-up. The
+issue's 30-minute soak: ``NAVDECK_SOAK_MINUTES=30 navdeck bench load.soak`` or
+``python -m bench.load --minutes 30 [--viewers 10]`` (prints each sample as it goes).
 """
 
 from __future__ import annotations
@@ -49,7 +52,14 @@ def soak() -> list[Figure]:
     from bench.load.run import LoadOptions, run_load
 
     minutes = float(os.environ.get("NAVDECK_SOAK_MINUTES", "3"))
-    opts = LoadOptions(viewers=50, seconds=minutes * 60.0, warmup_s=30.0, sample_every_s=10.0)
+    viewers = int(os.environ.get("NAVDECK_SOAK_VIEWERS", "50"))
+    seconds = minutes * 60.0
+    opts = LoadOptions(
+        viewers=viewers,
+        seconds=seconds,
+        warmup_s=120.0 if minutes >= 10 else 30.0,
+        sample_every_s=min(30.0, seconds / 10.0),
+    )
     return _figures(run_load(opts), soak=True)
 
 

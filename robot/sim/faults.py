@@ -43,6 +43,9 @@ class SimFaults:
     """rad/s added to the gyro on top of its normal bias (an MPU6050 after a temperature jump)."""
     battery_sag: float = 0.0
     """Volts subtracted from the battery voltage (a weak cell or a motor stall drawing current)."""
+    loop_delay: float = 0.0
+    """Seconds every ``read()`` blocks in real time (a stalled USB read, a CPU hog): with a real clock
+    the control loop overruns its period. No effect on simulated time."""
 
     def __post_init__(self) -> None:
         self.validate()
@@ -58,6 +61,8 @@ class SimFaults:
         for name in ("gyro_bias_jump", "battery_sag"):
             if not math.isfinite(getattr(self, name)):
                 raise FaultSpecError(f"{name} must be finite, got {getattr(self, name)!r}")
+        if not (math.isfinite(self.loop_delay) and 0.0 <= self.loop_delay <= 5.0):
+            raise FaultSpecError(f"loop_delay must be in [0, 5] s, got {self.loop_delay!r}")
 
     def tick_scale(self, wheel_count: int) -> np.ndarray:
         """Per-wheel factor applied to encoder increments (ones when no wheel slips)."""
@@ -97,7 +102,8 @@ class SimFaults:
 
     def apply(self, spec: str) -> None:
         """Apply one switch from text: ``lidar_off``, ``lidar_on``, ``lidar_garbage=0.3``,
-        ``encoder_slip=WHEEL:FACTOR`` (e.g. ``0:0.5``), ``gyro_bias=0.05``, ``battery_sag=1.5``.
+        ``encoder_slip=WHEEL:FACTOR`` (e.g. ``0:0.5``), ``gyro_bias=0.05``, ``battery_sag=1.5``,
+        ``loop_delay=0.12`` (seconds).
         Raises ``FaultSpecError`` naming the switch."""
         name, _, value = spec.strip().partition("=")
         name = name.strip().replace("-", "_")
@@ -113,10 +119,12 @@ class SimFaults:
                 self.gyro_bias_jump = float(value)
             elif name == "battery_sag":
                 self.battery_sag = float(value)
+            elif name == "loop_delay":
+                self.loop_delay = float(value)
             else:
                 raise FaultSpecError(
                     f"unknown fault {spec!r}: use lidar_off, lidar_garbage=F, encoder_slip=WHEEL:FACTOR, "
-                    "gyro_bias=RAD_S or battery_sag=VOLTS"
+                    "gyro_bias=RAD_S, battery_sag=VOLTS or loop_delay=SECONDS"
                 )
         except ValueError as exc:
             if isinstance(exc, FaultSpecError):

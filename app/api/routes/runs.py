@@ -93,8 +93,8 @@ def get_run(run_id: int, store: StoreDep) -> dict:
 def trajectory(
     run_id: int,
     store: StoreDep,
-    t0: float | None = None,
-    t1: float | None = None,
+    t0: Annotated[float | None, Query(allow_inf_nan=False)] = None,
+    t1: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     max_points: Annotated[int, Query(ge=2, le=100_000)] = 5000,
 ) -> dict:
     from app.export.tabular import samples_columns
@@ -138,7 +138,9 @@ def run_map_png(run_id: int, store: StoreDep) -> Response:
     summary="Replay seek: the run as it was at time t (pose, speeds, scan points, plan, goal)",
     responses=NOT_FOUND,
 )
-def state_at(run_id: int, store: StoreDep, t: Annotated[float, Query(ge=0)] = 0.0) -> dict:
+def state_at(
+    run_id: int, store: StoreDep, t: Annotated[float, Query(ge=0, allow_inf_nan=False)] = 0.0
+) -> dict:
     from app.runs.codec import MODES
 
     _found(store.run, run_id)
