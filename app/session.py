@@ -15,12 +15,13 @@ import time
 from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol
 
 import numpy as np
 
 from app.bus import Snapshot, SnapshotBus
+from app.fault_monitor import FaultMonitor, FaultMonitorOptions
 from app.limits import clamp_speed, limit_acceleration
 from app.modes import Mode, ModeMachine
 from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
@@ -56,6 +57,7 @@ class SessionOptions:
     lidar_timeout: float = 1.5  # s without a scan while moving the robot -> FAULT
     trail_length: int = 2000  # poses kept for the odometry trail
     trail_min_step: float = 0.02  # m between trail points
+    faults: FaultMonitorOptions = field(default_factory=FaultMonitorOptions)  # garbage/slip/imu/overrun
 
 
 @dataclass
@@ -132,6 +134,7 @@ class Session:
         self.collisions = 0
         self.distance_travelled = 0.0
         self.stats = LoopStats()
+        self.fault_monitor = FaultMonitor(self.profile, self.period, options.faults)
         self._teleop = TeleopState()
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
@@ -147,15 +150,23 @@ class Session:
         self.workers = ThreadPoolExecutor(max_workers=2, thread_name_prefix="worker")
         self._reset_driver = False
         self._wake = threading.Event()
+        # Reflex path: a teleop command is written at once, not at the next tick. From the caller's
+        # thread if the driver takes commands from any thread (no hand-over to a loop thread that may
+        # be mid-tick), else from the loop thread, woken. One command computed and written at a time.
+        self._command_lock = threading.RLock()
+        self._reflex_in_caller = bool(getattr(driver, "command_thread_safe", False))
+        self._ramp_end = math.inf  # when a ramp the reflex started reaches its command (loop sends it)
         self._last_send_t = self.clock.now()
         self.started_at = self.clock.now()
 
     # ------------------------------------------------------------------ commands from other threads
     def set_teleop(self, cmd: Twist2D, client: str) -> None:
-        """Store an operator's velocity command (teleop websocket). Applied while the mode allows it;
-        wakes the control loop so the command reaches the driver without waiting for the next tick."""
+        """Store an operator's velocity command (teleop websocket). Applied while the mode allows it,
+        and sent at once (reflex path) so it reaches the driver without waiting for the next tick."""
         with self._lock:
             self._teleop = TeleopState(cmd, self.clock.now(), client)
+        if self._reflex_in_caller and self._thread is not None and not self.clock.is_virtual:
+            self._reflex(schedule_ramp_end=True)
         self._wake.set()
 
     def stop_teleop(self, client: str | None = None) -> None:
@@ -181,6 +192,7 @@ class Session:
         with self._lock:
             self.estop_latched = False
             self.fault = None
+        self.fault_monitor.on_reset()
         self._reset_driver = True
         return mode
 
@@ -219,9 +231,15 @@ class Session:
 
     def _run(self) -> None:
         next_t = self.clock.now()
+        prev_start: float | None = None
         while not self._stop.is_set():
             start = self.clock.now()
             self.stats.lateness_ms.append(max(0.0, (start - next_t) * 1e3))
+            if prev_start is not None:
+                overrun = self.fault_monitor.check_period(start - prev_start)
+                if overrun is not None and self.fault is None:
+                    self._enter_fault(overrun)  # this tick's command is then the stop
+            prev_start = start
             t0 = time.perf_counter()
             try:
                 self.step()
@@ -238,25 +256,52 @@ class Session:
             self._sleep_until(next_t)
 
     def _sleep_until(self, next_t: float) -> None:
-        """Wait for the next tick; a fresh operator command wakes the loop to send it at once
-        (reflex path: command stage only, on the loop thread), so teleop latency is not a whole period."""
+        """Wait for the next tick. Reflex path: a fresh operator command is sent at once (by its
+        caller's thread, or here when the driver wants commands from the loop thread only), and the
+        end of the acceleration ramp it starts at the time the limit allows, so teleop latency is
+        not a whole period."""
         if self.clock.is_virtual:
             self.clock.sleep_until(next_t, self._stop)
             return
         while not self._stop.is_set():
-            remaining = next_t - self.clock.now()
-            if remaining <= 0:
+            now = self.clock.now()
+            if now >= next_t:
                 return
-            if self._wake.wait(remaining):
-                self._wake.clear()
-                if self._stop.is_set():
-                    return
-                try:
-                    self._send(self._choose_command(self.clock.now()))
-                except Exception as exc:
-                    log.exception("reflex command failed")
-                    self._enter_fault(f"internal error: {exc}")
-                    self._safe_stop()
+            if self._wake.wait(min(next_t, self._ramp_end) - now):
+                self._wake.clear()  # a teleop command: sent here unless its caller sent it already
+                if not self._reflex_in_caller and not self._stop.is_set():
+                    self._reflex(schedule_ramp_end=True)
+            elif self.clock.now() >= self._ramp_end and not self._stop.is_set():
+                # the ramp's end is sent when the acceleration limit allows, not at the next tick
+                # (one extra frame at most per operator message)
+                self._reflex(schedule_ramp_end=False)
+
+    def _reflex(self, schedule_ramp_end: bool) -> None:
+        """Send the command for the mode now (the first ramp step towards it); with
+        ``schedule_ramp_end`` note when the acceleration ramp will reach it for the loop to send."""
+        with self._command_lock:
+            self._ramp_end = math.inf
+            try:
+                cmd = self._choose_command(self.clock.now())
+                self._send(cmd)
+            except Exception as exc:
+                log.exception("reflex command failed")
+                self._enter_fault(f"internal error: {exc}")
+                self._safe_stop()
+                return
+            if cmd is None or not schedule_ramp_end:
+                return
+            target, _ = clamp_speed(cmd, self.profile.limits, self.profile.is_omni)
+            lim, sent = self.profile.limits, self.last_command
+            ramps = (  # (gap, acceleration, deceleration) as app.limits.limit_acceleration uses them
+                (target.vx - sent.vx, lim.acc_lim_x, lim.decel_lim_x),
+                (target.vy - sent.vy, lim.acc_lim_y or lim.acc_lim_x, lim.decel_lim_y or lim.decel_lim_x),
+                (target.wz - sent.wz, lim.acc_lim_theta, lim.decel_lim_theta),
+            )
+            rates = [(gap, min(acc, abs(dec) or acc)) for gap, acc, dec in ramps]
+            left = max((abs(gap) / rate for gap, rate in rates if rate > 0), default=0.0)
+            if left > 1e-9:  # 0.5 ms of slack: the ramp is certainly complete when its end is sent
+                self._ramp_end = self._last_send_t + left + 5e-4
 
     def run_for(self, seconds: float) -> None:
         """Step the loop synchronously for ``seconds`` of clock time (virtual-clock tests and benches)."""
@@ -268,22 +313,32 @@ class Session:
     def step(self) -> None:
         now = self.clock.now()
         self.stats.ticks += 1
-        frame = self.driver.read()
+        frame = self._screen_scan(self.driver.read())
         self._last_frame = frame
         self._ingest(frame, now)
         for stage in self.stages:
             stage.tick(self, frame, now)
-        cmd = self._choose_command(now)
-        self._send(cmd)
+        with self._command_lock:  # the reflex path may write from another thread
+            cmd = self._choose_command(now)
+            self._send(cmd)
         self._publish(now)
 
     # ------------------------------------------------------------------ tick stages
+    def _screen_scan(self, frame: SensorFrame) -> SensorFrame:
+        """Sanitize the scan's bad beams (NaN) or withhold a garbage scan from every consumer."""
+        if frame.scan is None:
+            return frame
+        clean, _ = self.fault_monitor.check_scan(frame.scan)
+        return frame if clean is frame.scan else replace(frame, scan=clean)
+
     def _ingest(self, frame: SensorFrame, now: float) -> None:
+        motion_fault = None
         if frame.ticks is not None:
             prev = self.odom_pose
             odo = self.odometry.update(frame.ticks, frame.imu)
             self.odom_pose, self.velocity, self.wheel_slip = odo.pose, odo.twist, odo.slipping
             self.distance_travelled += prev.distance_to(self.odom_pose)
+            motion_fault = self.fault_monitor.check_motion(frame.ticks, frame.imu, odo.gyro_bias)
         self.pose = self.map_to_odom.compose(self.odom_pose)
         if (
             not self._trail
@@ -300,7 +355,8 @@ class Session:
             self.collisions += 1
             self.add_event("collision", pose=[self.pose.x, self.pose.y, self.pose.theta])
         self.link_state, self.link_reason = frame.link.state, frame.link.reason
-        fault = frame.fault or self._fault_condition(now)
+        # garbage before silence: withheld garbage scans also make the lidar look silent after a while
+        fault = frame.fault or self.fault_monitor.lidar_reason() or self._fault_condition(now) or motion_fault
         if fault is not None and self.fault is None:
             self._enter_fault(fault)
         elif fault is not None and fault != self.fault and self.modes.mode == Mode.FAULT:
@@ -346,12 +402,13 @@ class Session:
         self.driver.command(limited)
 
     def _safe_stop(self) -> None:
-        self.last_command = ZERO_TWIST
-        self.last_clamped = ()
-        if self.estop_latched:
-            self.driver.estop()
-        else:
-            self.driver.stop()
+        with self._command_lock:  # after a reflex write in flight, never before it
+            self.last_command = ZERO_TWIST
+            self.last_clamped = ()
+            if self.estop_latched:
+                self.driver.estop()
+            else:
+                self.driver.stop()
 
     def _publish(self, now: float) -> None:
         self._seq += 1
@@ -437,7 +494,7 @@ class Session:
 
     def _fault_still_present(self) -> str | None:
         driver_fault = self._last_frame.fault if self._last_frame is not None else None
-        return self._fault_condition(self.clock.now()) or driver_fault
+        return driver_fault or self.fault_monitor.present() or self._fault_condition(self.clock.now())
 
     def _on_mode_change(self, old: Mode, new: Mode, reason: str) -> None:
         self.add_event("mode", **{"from": old.value, "to": new.value, "reason": reason})

@@ -7,6 +7,8 @@ assertions (link loss within ~0.3 s + one control period) carry scheduling slack
 
 from __future__ import annotations
 
+import contextlib
+import importlib
 import json
 import subprocess
 import sys
@@ -31,6 +33,14 @@ from robot.serial.pty import PtyPort
 
 PROFILE = load_profile("skid4")
 ROOT = Path(__file__).resolve().parent.parent
+
+# The server imports some modules only as it starts (the navigation feature pulls in scipy.optimize
+# through TEB). An import holds the GIL for up to ~0.6 s on a loaded machine and freezes the
+# in-process emulators with the server: the base looks silent (LOST) or its 200 ms watchdog fires, an
+# artefact of sharing one process that a real MCU does not have. Import them before any emulator runs.
+for _module in ("nav.navigator", "nav.control.teb"):
+    with contextlib.suppress(ImportError):
+        importlib.import_module(_module)
 SLACK = 0.4  # s of scheduling slack on timing bounds: these tests run on wall time on loaded machines
 
 

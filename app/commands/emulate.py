@@ -3,12 +3,18 @@
 ``emulate base`` runs the STM32 base *and* an RPLidar A1 on one simulated robot by default (they
 must share a world; ``--no-lidar`` for the base alone). ``emulate rplidar`` runs a lidar alone on a
 robot that stays at its start pose. Both print the device paths and the ``--robot`` URL, then run
-until Ctrl-C (or ``--duration`` seconds).
+until Ctrl-C (or ``--duration`` seconds). Lines typed on stdin flip fault switches live
+(``robot.serial.switches``: unplug, stall, drop/corrupt bytes, lidar health error).
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import os
+import signal
+import sys
+import threading
 import time
 
 from app.cli import CliError
@@ -68,19 +74,69 @@ def run(args: argparse.Namespace) -> int:
         )
         emulators = [lidar]
         dev = None
-        print(f"lidar: {lidar.path} -> {lidar.port.slave_name}", flush=True)
+        print(f"lidar: {lidar.path} -> {lidar.port.slave_name}")
+        print(
+            "note: this lidar's robot stands still at the start pose; for a lidar that sees the base "
+            "drive, run `navdeck emulate base` (it emulates both on one robot)",
+            flush=True,
+        )
     for e in emulators:
         e.faults.drop_prob = args.drop_prob
         e.faults.corrupt_prob = args.corrupt_prob
     pump.start()
     for e in emulators:
         e.start()
+    names = ("base", "lidar") if args.device == "base" else ("lidar",)
+    _read_switches(dict(zip(names, emulators, strict=False)))
+    previous = _exit_on_sigterm()
     try:
         end = time.monotonic() + args.duration if args.duration else None
         while end is None or time.monotonic() < end:
             time.sleep(0.1)
     finally:
         for e in emulators:
-            e.close()
+            e.close()  # removes the device links: nothing stale is left for a driver to open
         pump.close()
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
     return 0
+
+
+def _exit_on_sigterm() -> signal.Handlers | object | None:
+    """``kill`` ends the emulator like Ctrl-C does (through the cleanup); returns the old handler."""
+
+    def handler(signum: int, frame: object) -> None:
+        raise SystemExit(0)
+
+    try:
+        return signal.signal(signal.SIGTERM, handler)
+    except ValueError:  # not the main thread (an embedding caller): leave signals alone
+        return None
+
+
+def _read_switches(devices: dict) -> None:
+    """Fault switches typed on stdin, applied as they come (a daemon thread: Ctrl-C still ends)."""
+    from robot.serial.switches import HELP, apply_switch
+
+    if sys.stdin is None or not sys.stdin.isatty():
+        return  # piped or closed stdin (scripts, tests): no switches
+    # a background job (`navdeck emulate base &`) reading the terminal would be stopped by SIGTTIN;
+    # ignored, the read fails with EIO instead and only the switches end
+    with contextlib.suppress(ValueError, OSError):
+        signal.signal(signal.SIGTTIN, signal.SIG_IGN)
+    try:
+        if os.tcgetpgrp(sys.stdin.fileno()) != os.getpgrp():
+            return
+    except OSError:
+        return
+    print(HELP, flush=True)
+
+    def loop() -> None:
+        try:
+            for line in sys.stdin:
+                if answer := apply_switch(line, devices):
+                    print(answer, flush=True)
+        except (OSError, ValueError):
+            return
+
+    threading.Thread(target=loop, name="fault-switches", daemon=True).start()

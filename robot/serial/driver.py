@@ -311,9 +311,9 @@ class BaseLink:
         ser = self._ser
         if ser is None:
             return False
-        frame = self._seq.encode(msg)
         try:
-            with self._write_lock:
+            with self._write_lock:  # the loop, the reader's keep-alive and the reflex path all write
+                frame = self._seq.encode(msg)  # sequence numbers leave in order
                 t_write = time.monotonic()
                 ser.write(frame)
             self.sent_log.append((t_write, msg))
@@ -408,6 +408,10 @@ class SerialDriver:
 
     Raises ``PortUnavailableError`` (one-line reason) if a port is missing or busy at start.
     """
+
+    command_thread_safe = True
+    """``command``/``stop``/``estop`` may be called from any thread (``BaseLink`` locks its state and
+    serializes writes): the session's teleop reflex writes from the websocket's thread."""
 
     def __init__(
         self,

@@ -30,6 +30,7 @@ import contextlib
 import logging
 import math
 import struct
+import termios
 import threading
 import time
 from collections.abc import Callable
@@ -398,11 +399,24 @@ def rotation_to_scan(nodes: Nodes, spec: LidarSpec, stamp: float) -> LaserScan:
 
 def set_motor(ser: serial.Serial, on: bool) -> bool:
     """Motor on/off through DTR (A1 USB adapter: DTR asserted stops the motor). False if the port has
-    no modem lines (a pseudo-terminal)."""
+    no modem lines: a Linux pseudo-terminal answers the TIOCMBIS/TIOCMBIC ioctls with ENOTTY."""
     try:
         ser.dtr = not on
         return True
     except (OSError, serial.SerialException):
+        return False
+
+
+def hold_dtr_after_close(ser: serial.Serial) -> bool:
+    """Clear HUPCL so that closing the port leaves DTR as it is. With HUPCL (the usual default of USB
+    serial ports) the kernel drops DTR on the last close, and the A1's motor, stopped by DTR
+    asserted, spins again once navdeck has exited. False if the port has no termios."""
+    try:
+        attrs = termios.tcgetattr(ser.fileno())
+        attrs[2] &= ~termios.HUPCL
+        termios.tcsetattr(ser.fileno(), termios.TCSANOW, attrs)
+        return True
+    except (termios.error, OSError, ValueError, AttributeError, serial.SerialException):
         return False
 
 
@@ -455,6 +469,8 @@ class RPLidar:
         self.health: Health | None = None
         self.scans = 0
         self.samples = 0
+        self.motor_on = False  # what was last asked of the motor line
+        self.motor_line: bool | None = None  # whether the port has a DTR line (None: not tried yet)
         self._thread = threading.Thread(target=self._run, name=f"rplidar {port}", daemon=True)
         self._thread.start()
 
@@ -496,6 +512,16 @@ class RPLidar:
                         return r
         return None
 
+    def _motor(self, ser: serial.Serial, on: bool) -> None:
+        """Switch the motor through DTR; a port without modem-control ioctls (the emulator's pty) is
+        noted once: a motor behind such a port spins whenever it is powered."""
+        self.motor_on = on
+        if set_motor(ser, on):
+            self.motor_line = True
+        elif self.motor_line is None:
+            self.motor_line = False
+            log.info("lidar port %s has no DTR line: the motor cannot be switched from here", self.port)
+
     def _stop_scan(self, ser: serial.Serial) -> None:
         self._write(ser, request(Cmd.STOP))
         time.sleep(0.01)  # the A1 needs >= 1 ms after STOP before the next request
@@ -505,7 +531,7 @@ class RPLidar:
 
     def _session(self, ser: serial.Serial) -> None:
         """Health check, info, then scan until the sensor goes silent or the port dies."""
-        set_motor(ser, True)
+        self._motor(ser, True)  # the A1 needs its motor spinning before SCAN gives nodes
         self._stop_scan(ser)
         health = self._ask(ser, Cmd.GET_HEALTH, Health)
         if health is None:
@@ -542,7 +568,8 @@ class RPLidar:
                 return
         with contextlib.suppress(Exception):
             self._stop_scan(ser)
-            set_motor(ser, False)
+            self._motor(ser, False)
+            hold_dtr_after_close(ser)  # the motor stays stopped once the port is closed
 
     def _on_nodes(self, nodes: Nodes) -> None:
         self.samples += len(nodes)

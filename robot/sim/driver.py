@@ -14,6 +14,7 @@ driver reports the way failing hardware would.
 from __future__ import annotations
 
 import math
+import time
 from dataclasses import replace
 
 import numpy as np
@@ -105,6 +106,8 @@ class SimDriver:
 
     def read(self) -> SensorFrame:
         """Step physics to ``clock.now()`` and return everything new since the last call."""
+        if self.faults.loop_delay > 0.0:
+            time.sleep(self.faults.loop_delay)  # fault switch: a read that stalls the control loop
         now = self.clock.now()
         steps = math.floor((now - self._t) / self._dt + 1e-9)
         for _ in range(max(0, steps)):
