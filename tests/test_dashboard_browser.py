@@ -19,6 +19,7 @@ import pytest
 from conftest import ARTIFACTS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
+from app.viewer import palette
 from nav.types import Pose2D
 
 CHROMIUM = pathlib.Path("/usr/bin/chromium")
@@ -288,6 +289,13 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
         wait_until(page, lambda: not nav.state()["active"], timeout=30)
     if not accepted:
         pytest.skip("no candidate pixel landed on free ground 0.6-2.5 m from the robot")
+    # the status panel names the current behaviour on the 3D view's colour for it
+    page.wait_for_selector("#st-behavior .behavior-tag", timeout=LONG)
+    name, bg = page.evaluate(
+        "(() => { const t = document.querySelector('#st-behavior .behavior-tag');"
+        " return [t.textContent, getComputedStyle(t).backgroundColor]; })()"
+    )
+    assert name in palette.BEHAVIOR_COLORS and bg == "rgb({}, {}, {})".format(*palette.BEHAVIOR_COLORS[name])
     shot(page, "goal")
     assert wait_until(page, lambda: not nav.state()["active"], timeout=90, step_ms=250)
     outcome = nav.state()["outcome"]

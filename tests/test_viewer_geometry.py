@@ -57,3 +57,16 @@ def test_pose_arrows_start_at_pose_and_point_along_heading(poses: np.ndarray) ->
     np.testing.assert_allclose(np.hypot(d[:, 0], d[:, 1]), 0.2, atol=1e-4)
     heading = np.arctan2(d[:, 1], d[:, 0])
     np.testing.assert_allclose(np.cos(heading - poses[:, 2]), 1.0, atol=1e-3)
+
+
+def test_pose_arrow_lines_shaft_and_head() -> None:
+    poses = np.array([[0.0, 0.0, 0.0], [1.0, 2.0, np.pi / 2], [np.nan, 0.0, 0.0]])
+    a = geo.pose_arrow_lines(poses, 0.2, 0.01)
+    assert a.shape == (2, 3, 2, 3)  # the non-finite pose dropped
+    np.testing.assert_allclose(a[1, 0, :, :2], [[1.0, 2.0], [1.0, 2.2]], atol=1e-6)  # shaft along theta
+    heads = a[1, 1:, 1, :2]  # both strokes start at the tip and end behind it, one each side
+    np.testing.assert_allclose(a[1, 1:, 0, :2], [[1.0, 2.2], [1.0, 2.2]], atol=1e-6)
+    back = 0.06 * np.cos(np.pi / 6)  # strokes 0.3 of the length, 30 degrees off the shaft
+    np.testing.assert_allclose(sorted(heads[:, 0]), [0.97, 1.03], atol=1e-6)
+    np.testing.assert_allclose(heads[:, 1], [2.2 - back, 2.2 - back], atol=1e-6)
+    assert np.allclose(a[..., 2], 0.01)

@@ -72,14 +72,16 @@ def test_layers_follow_snapshot(viewer: Viewer) -> None:
     assert robot is not None
     np.testing.assert_allclose(robot.position, (1.0, 2.0, 0.0))
     np.testing.assert_allclose(robot.wxyz, (math.cos(0.25), 0, 0, math.sin(0.25)), atol=1e-9)
-    scan_pts = s.get_handle_by_name("/robot/scan").points
+    bands = [s.get_handle_by_name(f"/robot/scan/band_{i}") for i in range(len(palette.SCAN_BANDS))]
+    scan_pts = np.concatenate([b.points for b in bands])
     assert scan_pts.shape == (360 - 36 - 1, 3)  # inf and nan dropped
+    assert [len(b.points) for b in bands] == [0, 0, 360 - 36 - 1]  # all at 2 m: the far band
     np.testing.assert_allclose(np.hypot(scan_pts[:, 0], scan_pts[:, 1]), 2.0, atol=1e-5)
     assert s.get_handle_by_name("/robot/footprint").points.shape == (4, 2, 3)
     np.testing.assert_allclose(s.get_handle_by_name("/robot/body").dimensions, (0.24, 0.20, 0.08))
     assert s.get_handle_by_name("/trail").points.shape == (19, 2, 3)
     assert s.get_handle_by_name("/plan/global").points.shape == (29, 2, 3)
-    arrows = s.get_handle_by_name("/particles").points
+    arrows = s.get_handle_by_name("/particles").points.reshape(-1, 3, 2, 3)[:, 0]  # shafts (+ 2 head strokes)
     assert arrows.shape == (500, 2, 3)
     np.testing.assert_allclose(arrows[:, 0, :2], particles[:, :2], atol=1e-5)
     assert len(viewer.map_layer.tile_names) == 20  # 600x400 cells in 128-cell tiles: 5 x 4
@@ -92,7 +94,7 @@ def test_layers_follow_snapshot(viewer: Viewer) -> None:
     # Next tick: the pose and scan move, the optional layers go away -> hidden, never removed.
     viewer.apply(snap(1, pose=Pose2D(-1.0, 0.5, -1.0), scan=make_scan(r=3.0), grid=grid, grid_version=1))
     np.testing.assert_allclose(robot.position, (-1.0, 0.5, 0.0))
-    pts = s.get_handle_by_name("/robot/scan").points
+    pts = s.get_handle_by_name(f"/robot/scan/band_{len(palette.SCAN_BANDS) - 1}").points
     np.testing.assert_allclose(np.hypot(pts[:, 0], pts[:, 1]), 3.0, atol=1e-5)
     for node in ("/trail", "/plan/global", "/particles"):
         assert not viewer.is_shown(node)
@@ -246,8 +248,9 @@ def test_palettes_match_rviz() -> None:
     np.testing.assert_array_equal(c[253], (0, 255, 255, 255))  # inscribed cyan
     assert c[0, 3] == 0 and c[255, 3] == 0
     assert c[1, 2] > c[1, 0] and c[252, 0] > c[252, 2]  # blue -> red
-    rc = palette.range_colors(np.array([0.0, 6.0]), 6.0)
-    np.testing.assert_array_equal(rc, [[255, 0, 0], [0, 0, 255]])
+    bands = palette.scan_band(np.array([0.0, 0.49, 0.5, 1.9, 2.0, 6.0, np.inf]))
+    np.testing.assert_array_equal(bands, [0, 0, 1, 1, 2, 2, 2])
+    assert palette.SCAN_BANDS[0][1][0] > 200 and palette.SCAN_BANDS[-1][1][2] > 200  # red near, blue far
 
 
 def test_pose_input_geometry() -> None:
@@ -303,3 +306,109 @@ def test_restart_redraws_everything() -> None:
         v.apply(snap(grid=grid, grid_version=1))  # same grid, new server: must be sent again
         assert v.map_layer.encodes == 1 and v.server.scene.get_handle_by_name("/map/tile_0_0") is not None
         assert v.port > 0 and isinstance(first_port, int)
+
+
+def test_behavior_is_named_and_coloured(viewer: Viewer) -> None:
+    s = viewer.server.scene
+    ring, label = s.get_handle_by_name("/robot/behavior"), s.get_handle_by_name("/robot/label")
+    viewer.apply(snap(extras={"footprint": FOOTPRINT}))
+    assert ring.visible is False and label.visible is False and viewer.behavior_badge.visible is False
+    radius = np.hypot(ring.points[:, 0, 0], ring.points[:, 0, 1])
+    np.testing.assert_allclose(radius, np.hypot(0.12, 0.10) + 0.1, atol=1e-5)  # just outside the footprint
+
+    colors = {}
+    for name in ("follow_path", "spin", "back_up"):
+        viewer.apply(snap(behavior=name, extras={"footprint": FOOTPRINT}))
+        assert ring.visible and label.visible and label.text == name
+        colors[name] = tuple(np.asarray(ring.colors).reshape(-1, 3)[0])
+        assert colors[name] == palette.BEHAVIOR_COLORS[name]
+        assert viewer.behavior_badge.visible
+        assert palette.hex_color(palette.BEHAVIOR_COLORS[name]) in viewer.behavior_badge.content
+        assert f">{name}<" in viewer.behavior_badge.content
+    assert len(set(colors.values())) == 3  # each behaviour its own colour
+
+    viewer.apply(snap(behavior="<b>my_plugin</b>", extras={"footprint": FOOTPRINT}))
+    assert tuple(np.asarray(ring.colors).reshape(-1, 3)[0]) == palette.UNKNOWN_BEHAVIOR
+    assert "<b>" not in viewer.behavior_badge.content  # escaped
+    viewer.apply(snap(behavior=None, extras={"footprint": FOOTPRINT}))
+    assert ring.visible is False and label.visible is False and viewer.behavior_badge.visible is False
+
+
+def test_recovery_markers_where_attempts_started(viewer: Viewer) -> None:
+    s = viewer.server.scene
+    marks = ((1.0, 2.0, 0.0, "clear_local_costmap"), (1.5, 2.5, 1.0, "spin"), (2.0, 2.0, 0.0, "back_up"))
+    viewer.apply(snap(extras={"recovery_markers": marks}))
+    assert viewer.is_shown("/recoveries")
+    markers = s.get_handle_by_name("/recoveries/markers")
+    pts = markers.points.reshape(3, 4, 2, 3)
+    np.testing.assert_allclose(pts[:, :, 0, :2].mean(axis=1), [m[:2] for m in marks], atol=1e-6)  # centred
+    cols = np.asarray(markers.colors).reshape(3, 8, 3)
+    for i, m in enumerate(marks):
+        assert (cols[i] == palette.BEHAVIOR_COLORS[m[3]]).all()
+    for i, m in enumerate(marks):
+        lab = s.get_handle_by_name(f"/recoveries/label_{i}")
+        assert lab.text == f"{i + 1}. {m[3]}" and lab.visible
+        np.testing.assert_allclose(lab.position[:2], m[:2])
+
+    viewer.set_layer_enabled("Recoveries", False)
+    assert not viewer.is_shown("/recoveries") and s.get_handle_by_name("/recoveries").visible is False
+    viewer.set_layer_enabled("Recoveries", True)
+    assert viewer.is_shown("/recoveries")
+
+    viewer.apply(snap(extras={"recovery_markers": marks[:1]}))  # fewer: spare labels hidden, not removed
+    assert s.get_handle_by_name("/recoveries/label_1").visible is False
+    assert markers.points.shape == (4, 2, 3)
+    viewer.apply(snap(extras={}))  # a new navigation: no markers
+    assert not viewer.is_shown("/recoveries")
+
+
+def test_teb_band_poses(viewer: Viewer) -> None:
+    s = viewer.server.scene
+    n = 25
+    band = np.column_stack((np.linspace(0, 2, n), 0.3 * np.sin(np.linspace(0, 3, n)), np.linspace(0, 1, n)))
+    viewer.apply(snap(extras={"teb_band": band}))
+    assert viewer.is_shown("/plan/teb")
+    poses = s.get_handle_by_name("/plan/teb/poses").points.reshape(n, 3, 2, 3)[
+        :, 0
+    ]  # shafts (+ 2 head strokes)
+    np.testing.assert_allclose(poses[:, 0, :2], band[:, :2], atol=1e-6)
+    heading = np.arctan2(*(poses[:, 1, :2] - poses[:, 0, :2]).T[::-1])
+    np.testing.assert_allclose(heading, band[:, 2], atol=1e-5)  # arrows point along each pose's theta
+    assert s.get_handle_by_name("/plan/teb/band").points.shape == (n - 1, 2, 3)
+    viewer.set_layer_enabled("TEB band", False)
+    assert not viewer.is_shown("/plan/teb")
+    viewer.set_layer_enabled("TEB band", True)
+    viewer.apply(snap(extras={}))  # DWA drives: no band
+    assert not viewer.is_shown("/plan/teb")
+
+
+def test_behavior_palette_matches_dashboard() -> None:
+    """frontend/js/behaviors.js must colour behaviours exactly as the 3D view does."""
+    import pathlib
+    import re
+
+    js = (pathlib.Path(__file__).parents[1] / "frontend/js/behaviors.js").read_text()
+    table = js[js.index("BEHAVIOR_COLORS = {") : js.index("};")]
+    parsed = {k: tuple(map(int, v.split(","))) for k, v in re.findall(r"(\w+): \[([\d, ]+)\]", table)}
+    assert parsed == palette.BEHAVIOR_COLORS
+    unknown = re.search(r"UNKNOWN_BEHAVIOR = \[([\d, ]+)\]", js)
+    assert unknown and tuple(map(int, unknown.group(1).split(","))) == palette.UNKNOWN_BEHAVIOR
+
+
+def test_scan_bands_by_range_with_fixed_colours(viewer: Viewer) -> None:
+    """Points move between range bands; a band's colour array is never re-sent (in the browser a new
+    colour array means a new material and a shader recompile on every scan)."""
+    s = viewer.server.scene
+    bands = [s.get_handle_by_name(f"/robot/scan/band_{i}") for i in range(len(palette.SCAN_BANDS))]
+    colors_before = [b.colors for b in bands]
+    ranges = np.array([0.3, 0.45, 1.0, 1.99, 2.5, 5.0, np.inf, 0.3])
+    scan = LaserScan(0.0, 0.0, 0.1, ranges, 0.15, 6.0)
+    viewer.apply(snap(scan=scan))
+    assert [len(b.points) for b in bands] == [3, 2, 2]
+    np.testing.assert_allclose(
+        np.hypot(bands[0].points[:, 0], bands[0].points[:, 1]), [0.3, 0.45, 0.3], atol=1e-5
+    )
+    viewer.apply(snap(seq=1, scan=LaserScan(0.1, 0.0, 0.1, np.full(8, 3.0), 0.15, 6.0)))
+    assert [len(b.points) for b in bands] == [0, 0, 8]
+    for b, before, (_edge, rgb) in zip(bands, colors_before, palette.SCAN_BANDS, strict=True):
+        assert b.colors is before and tuple(np.asarray(b.colors).reshape(-1)[:3]) == rgb

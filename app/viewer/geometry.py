@@ -106,3 +106,41 @@ def disc_segments(discs: np.ndarray, z: float, sides: int = 16) -> np.ndarray:
     tick = np.stack((centre, nose), axis=1)[:, None]  # (P, 1, 2, 2)
     both = np.concatenate((seg, tick), axis=1).reshape(-1, 2, 2)
     return np.concatenate((both, np.full((*both.shape[:2], 1), z)), axis=-1).astype(np.float32)
+
+
+def circle_segments(radius: float, z: float = 0.0, sides: int = 32) -> np.ndarray:
+    """A circle of ``radius`` about the origin as (sides, 2, 3) segments."""
+    a = np.linspace(0.0, 2.0 * np.pi, sides + 1)
+    return polyline_segments(np.column_stack((radius * np.cos(a), radius * np.sin(a))), z)
+
+
+def diamond_segments(xy: np.ndarray, half: float, z: float = 0.0) -> np.ndarray:
+    """(K, 2) centres -> (K, 4, 2, 3): a diamond (square on its corner) of half-diagonal ``half`` each."""
+    c = np.asarray(xy, dtype=np.float32).reshape(-1, 2)
+    corners = np.array([[half, 0.0], [0.0, half], [-half, 0.0], [0.0, -half]], np.float32)
+    ring = c[:, None, :] + corners[None]  # (K, 4, 2)
+    seg = np.empty((c.shape[0], 4, 2, 3), np.float32)
+    seg[:, :, 0, :2] = ring
+    seg[:, :, 1, :2] = np.roll(ring, -1, axis=1)
+    seg[..., 2] = z
+    return seg
+
+
+def pose_arrow_lines(
+    poses: np.ndarray, length: float, z: float = 0.0, head: float = 0.3, max_poses: int | None = None
+) -> np.ndarray:
+    """(N, 3+) poses -> (N', 3, 2, 3): per pose a shaft along theta and two head strokes (``head`` of the
+    length, 30 degrees off the shaft), subsampled like ``pose_arrows``. Line segments, so the browser
+    needs no mesh (PBR) shader program to draw them."""
+    shaft = pose_arrows(poses, length, z, max_poses)  # (N', 2, 3), non-finite rows dropped
+    tip = shaft[:, 1, :2].astype(float)
+    theta = np.arctan2(*(shaft[:, 1, :2] - shaft[:, 0, :2]).T[::-1].astype(float))
+    out = np.empty((len(shaft), 3, 2, 3), np.float32)
+    out[:, 0] = shaft
+    for k, side in enumerate((1.0, -1.0), start=1):
+        back = theta + np.pi - side * np.pi / 6.0
+        out[:, k, 0, :2] = tip
+        out[:, k, 1, 0] = tip[:, 0] + head * length * np.cos(back)
+        out[:, k, 1, 1] = tip[:, 1] + head * length * np.sin(back)
+        out[:, k, :, 2] = z
+    return out

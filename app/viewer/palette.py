@@ -89,16 +89,21 @@ def colorize(codes: np.ndarray, lut: np.ndarray, upsample: int = 1) -> np.ndarra
     return rgba
 
 
-def range_colors(ranges: np.ndarray, range_max: float) -> np.ndarray:
-    """(N,) metres -> (N, 3) uint8 rainbow (red near, through yellow/green, to blue far), like Rviz's
-    LaserScan display with the "Axis"/rainbow colour transformer: near returns stand out."""
-    t = np.clip(np.asarray(ranges, dtype=float) / max(float(range_max), 1e-6), 0.0, 1.0)
-    # HSV hue 0 (red) -> 240 deg (blue) at full saturation and value: h in sextants 0..4.
-    h = t * 4.0
-    r = np.clip(np.abs(h - 3.0) - 1.0, 0.0, 1.0)
-    g = np.clip(2.0 - np.abs(h - 2.0), 0.0, 1.0)
-    b = np.clip(2.0 - np.abs(h - 4.0), 0.0, 1.0)
-    return (np.column_stack((r, g, b)) * 255.0).round().astype(np.uint8)
+# Scan points coloured by range in a few bands, each band one point cloud with one flat colour (red near,
+# yellow, blue far: Rviz's rainbow transformer, coarsened). Not per-point colours: viser's client builds a
+# new point material whenever a cloud's colour array changes, and three.js then recompiles its shader
+# program (100-500 ms of the page's main thread under software WebGL, on every scan).
+SCAN_BANDS: tuple[tuple[float, tuple[int, int, int]], ...] = (
+    (0.5, (255, 40, 40)),  # < 0.5 m: inside the safety layer's slow-down zone
+    (2.0, (255, 200, 0)),
+    (float("inf"), (40, 160, 255)),
+)
+
+
+def scan_band(ranges: np.ndarray) -> np.ndarray:
+    """(N,) metres -> (N,) index into ``SCAN_BANDS`` (the first band whose upper edge exceeds it)."""
+    edges = np.array([b[0] for b in SCAN_BANDS[:-1]])
+    return np.searchsorted(edges, np.asarray(ranges, dtype=float), side="right")
 
 
 # Flat colours for vector layers (RGB), close to Rviz's defaults for the same displays.
@@ -115,3 +120,32 @@ GRAPH_EDGES = (0, 200, 255)
 PREVIEW = (80, 255, 80)
 
 PEOPLE = (255, 140, 0)  # simulated people (orange discs)
+TEB_BAND = (255, 105, 180)  # TEB band poses (pink), apart from DWB samples (grey) and best (green)
+
+# Behaviour colours, shared by the 3D view (ring + marker colour) and the dashboard's status panel
+# (frontend/js/behaviors.js holds the same table; a test keeps the two equal). Navigation itself is
+# calm (blue/green), recoveries are warm and each one distinct, so an operator can tell at a glance
+# which recovery is running and which ones already ran (the markers keep their colour).
+BEHAVIOR_COLORS: dict[str, tuple[int, int, int]] = {
+    "compute_path": (40, 120, 255),  # Nav2 ComputePathToPose: planning, waiting for a path
+    "follow_path": (0, 200, 120),  # Nav2 FollowPath: the controller is driving
+    "blocked": (230, 50, 50),  # no safe trajectory this cycle: stopped, looking for another way
+    "clear_local_costmap": (0, 200, 230),
+    "clear_global_costmap": (0, 140, 200),
+    "spin": (170, 80, 255),
+    "spin_until_matched": (230, 60, 200),
+    "wait": (255, 200, 0),
+    "back_up": (255, 120, 0),
+    "drive_on_heading": (180, 220, 40),
+}
+UNKNOWN_BEHAVIOR = (170, 170, 170)
+
+
+def behavior_color(name: str | None) -> tuple[int, int, int]:
+    """RGB of a behaviour name (grey for one not in the table, e.g. a plugin's own behaviour)."""
+    return BEHAVIOR_COLORS.get(name or "", UNKNOWN_BEHAVIOR)
+
+
+def hex_color(rgb: tuple[int, int, int]) -> str:
+    """(r, g, b) -> "#rrggbb"."""
+    return "#{:02x}{:02x}{:02x}".format(*rgb)

@@ -18,6 +18,7 @@ heading; both end in ``on_pose_input(kind, pose)``, which must only enqueue.
 from __future__ import annotations
 
 import dataclasses
+import html
 import logging
 import math
 import threading
@@ -61,7 +62,22 @@ LAYERS: dict[str, str] = {
     "Particles": "/particles",
     "Loop closures": "/graph/edges",
     "People": "/people",
+    "Recoveries": "/recoveries",
+    "TEB band": "/plan/teb",
 }
+
+MAX_RECOVERY_LABELS = 24
+"""Recovery markers beyond this many (in one navigation) keep their marker but get no label."""
+
+
+def behavior_badge_html(name: str | None) -> str:
+    """The panel's behaviour badge: the name on its colour (escaped: names come from config)."""
+    text = html.escape(name or "")
+    bg = palette.hex_color(palette.behavior_color(name))
+    return (
+        f'<div style="display:inline-block;padding:2px 10px;border-radius:10px;background:{bg};'
+        f'color:#111;font-weight:600" data-behavior="{text}">{text}</div>'
+    )
 
 
 @dataclass(frozen=True)
@@ -94,6 +110,12 @@ class ViewerOptions:
     """Particles beyond this are subsampled for display."""
     max_local_samples: int = 400
     """Local trajectory samples beyond this are subsampled for display."""
+    behavior_ring_margin: float = 0.1
+    """The behaviour ring's radius beyond the footprint's circumscribed radius (m)."""
+    recovery_marker_radius: float = 0.15
+    """Half-size of a recovery marker's diamond (m)."""
+    teb_arrow_length: float = 0.12
+    """Length of a TEB band pose arrow (m)."""
 
 
 @dataclass
@@ -201,6 +223,12 @@ class Viewer:
         s = self.server.scene
         o = self.options
         s.set_up_direction("+z")
+        # A top-down navigation view needs neither image-based lighting nor shadows. viser's client
+        # defaults to both (an HDRI environment, pre-filtered with PMREM, and cascaded shadow maps), and
+        # each adds shader programs and render passes before the first frame: seconds under software
+        # WebGL (bench dashboard.browser). The two default directional lights still shade the robot.
+        s.configure_environment_map(hdri=None)
+        s.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.initial_camera.position = (-4.0, -6.0, 8.0)
         self.server.initial_camera.look_at = (0.0, 0.0, 0.0)
         self.map_layer = TiledGridLayer(
@@ -218,23 +246,41 @@ class Viewer:
             thickness=o.path_thickness_px,
             thickness_units="screen",
         )
-        h["/robot/heading"] = s.add_arrows(
+        # An arrow drawn with lines, not a mesh: lines share one shader program with every other line
+        # layer, a mesh arrow needs a PBR program compiled at page load (seconds under software WebGL).
+        h["/robot/heading"] = s.add_line_segments(
             "/robot/heading",
-            np.array([[[0.0, 0.0, 0.03], [0.25, 0.0, 0.03]]], np.float32),
+            np.array(
+                [
+                    [[0.0, 0.0, 0.03], [0.25, 0.0, 0.03]],
+                    [[0.25, 0.0, 0.03], [0.18, 0.05, 0.03]],
+                    [[0.25, 0.0, 0.03], [0.18, -0.05, 0.03]],
+                ],
+                np.float32,
+            ),
             palette.HEADING,
-            shaft_radius=0.012,
-            head_radius=0.035,
-            head_length=0.07,
+            thickness=4.0,
+            thickness_units="screen",
         )
-        h["/robot/scan"] = s.add_point_cloud(
-            "/robot/scan",
-            np.zeros((0, 3), np.float32),
-            np.zeros((0, 3), np.uint8),
-            point_size=o.scan_point_size,
-            point_shape="circle",
-            precision="float32",
-        )
+        h["/robot/scan"] = s.add_frame("/robot/scan", show_axes=False)
+        for i, (_edge, rgb) in enumerate(palette.SCAN_BANDS):
+            h[f"/robot/scan/band_{i}"] = s.add_point_cloud(
+                f"/robot/scan/band_{i}",
+                np.zeros((0, 3), np.float32),
+                rgb,  # set once: a changed colour array costs a shader recompile in the browser
+                point_size=o.scan_point_size,
+                point_shape="circle",
+                precision="float32",
+            )
         h["/robot/label"] = s.add_label("/robot/label", "", position=(0.0, 0.0, 0.35), visible=False)
+        h["/robot/behavior"] = s.add_line_segments(
+            "/robot/behavior",
+            geo.circle_segments(0.3, 0.015),
+            palette.UNKNOWN_BEHAVIOR,
+            thickness=4.0,
+            thickness_units="screen",
+            visible=False,
+        )
         h["/trail"] = self._lines("/trail", palette.TRAIL)
         h["/plan"] = s.add_frame("/plan", show_axes=False)
         h["/plan/global"] = self._lines("/plan/global", palette.GLOBAL_PLAN)
@@ -250,16 +296,16 @@ class Viewer:
             point_shape="diamond",
             precision="float32",
         )
-        h["/particles"] = s.add_arrows(
-            "/particles",
-            np.zeros((0, 2, 3), np.float32),
-            palette.PARTICLES,
-            shaft_radius=0.005,
-            head_radius=0.015,
-            head_length=0.04,
-            visible=False,
-        )
+        h["/particles"] = self._lines("/particles", palette.PARTICLES, 1.5)  # Rviz's flat arrows, as lines
         h["/people"] = self._lines("/people", palette.PEOPLE, 2.5)
+        h["/recoveries"] = s.add_frame("/recoveries", show_axes=False, visible=False)
+        h["/recoveries/markers"] = self._lines("/recoveries/markers", palette.UNKNOWN_BEHAVIOR, 3.0)
+        h["/recoveries/markers"].visible = True  # the parent frame's visibility toggles the layer
+        h["/plan/teb"] = s.add_frame("/plan/teb", show_axes=False, visible=False)
+        h["/plan/teb/band"] = self._lines("/plan/teb/band", palette.TEB_BAND, 2.0)
+        h["/plan/teb/band"].visible = True
+        h["/plan/teb/poses"] = self._lines("/plan/teb/poses", palette.TEB_BAND, 2.0)  # arrows as lines
+        h["/plan/teb/poses"].visible = True
         h["/graph"] = s.add_frame("/graph", show_axes=False)
         h["/graph/edges"] = self._lines("/graph/edges", palette.GRAPH_EDGES, 2.0)
         h["/input/preview"] = s.add_arrows(
@@ -301,6 +347,7 @@ class Viewer:
         )
         gui.set_panel_label("navdeck")
         self.status = gui.add_markdown("**waiting for the robot…**")
+        self.behavior_badge = gui.add_html(behavior_badge_html(None), visible=False)
         with gui.add_folder("Pose input"):
             self.click_mode = gui.add_dropdown("Click sets", tuple(POSE_KINDS), initial_value="goal")
             gui.add_markdown("Click: position. **Shift+drag** on the map: position and heading.")
@@ -354,14 +401,17 @@ class Viewer:
         if fp is not None and fp is not last.get("footprint"):
             last["footprint"] = fp
             h["/robot/footprint"].points = geo.ring_segments(fp, 0.01)
+            r = float(np.max(np.hypot(*np.asarray(fp, dtype=float).reshape(-1, 2).T)))
+            h["/robot/behavior"].points = geo.circle_segments(r + o.behavior_ring_margin, 0.015)
             self._draw_body(np.asarray(fp, dtype=float).reshape(-1, 2))
 
         if snap.scan is not None and (snap.scan is not last.get("scan") or snap.laser_pose != last.get("lp")):
             last["scan"], last["lp"] = snap.scan, snap.laser_pose
             pts, r = geo.scan_points(snap.scan, snap.laser_pose, o.scan_height)
+            band = palette.scan_band(r)
             with self.server.atomic():
-                h["/robot/scan"].points = pts
-                h["/robot/scan"].colors = palette.range_colors(r, snap.scan.range_max)
+                for i in range(len(palette.SCAN_BANDS)):
+                    h[f"/robot/scan/band_{i}"].points = pts[band == i]
 
         if snap.trail is not last.get("trail"):
             last["trail"] = snap.trail
@@ -403,9 +453,9 @@ class Viewer:
             last["particles"] = snap.particles
             present = snap.particles is not None and len(snap.particles) > 0
             if present:
-                h["/particles"].points = geo.pose_arrows(
-                    snap.particles, o.particle_arrow_length, 0.02, o.max_particles
-                )
+                h["/particles"].points = geo.pose_arrow_lines(
+                    snap.particles, o.particle_arrow_length, 0.02, max_poses=o.max_particles
+                ).reshape(-1, 2, 3)
             self._set_data("/particles", present)
 
         people = snap.extras.get("people")  # (P, 4): x, y, heading, radius (simulated people)
@@ -426,9 +476,25 @@ class Viewer:
 
         if snap.behavior != last.get("behavior"):
             last["behavior"] = snap.behavior
-            if snap.behavior:
-                h["/robot/label"].text = snap.behavior
-            h["/robot/label"].visible = bool(snap.behavior)
+            self._draw_behavior(snap.behavior)
+
+        marks = snap.extras.get("recovery_markers")  # ((x, y, theta, behaviour name), ...)
+        if marks is not last.get("recoveries"):
+            last["recoveries"] = marks
+            self._draw_recoveries(marks)
+
+        band = snap.extras.get("teb_band")  # (N, 3) TEB poses, map frame
+        if band is not last.get("teb_band"):
+            last["teb_band"] = band
+            present = band is not None and len(band) >= 2
+            if present:
+                poses = np.asarray(band, dtype=float)
+                with self.server.atomic():
+                    h["/plan/teb/band"].points = geo.polyline_segments(poses, 0.014)
+                    h["/plan/teb/poses"].points = geo.pose_arrow_lines(
+                        poses, o.teb_arrow_length, 0.016
+                    ).reshape(-1, 2, 3)
+            self._set_data("/plan/teb", present)
 
         now = time.monotonic()
         if now >= self._status_due:
@@ -448,9 +514,55 @@ class Viewer:
             dimensions=(float(hi[0] - lo[0]), float(hi[1] - lo[1]), 0.08),
             position=(float(centre[0]), float(centre[1]), 0.04),
             opacity=0.6,
+            material="toon3",  # lit without PBR: a much smaller shader to compile in the browser
             cast_shadow=False,
             receive_shadow=False,
         )
+
+    def _draw_behavior(self, name: str | None) -> None:
+        """Name and colour the current behaviour: a ring around the robot, a label above it and a
+        badge in the panel (the dashboard's status panel uses the same colours)."""
+        h = self._h
+        rgb = palette.behavior_color(name)
+        with self.server.atomic():
+            if name:
+                h["/robot/label"].text = name
+                h["/robot/behavior"].colors = np.array(rgb, np.uint8)
+            h["/robot/label"].visible = bool(name)
+            h["/robot/behavior"].visible = bool(name)
+        self.behavior_badge.content = behavior_badge_html(name)
+        self.behavior_badge.visible = bool(name)
+
+    def _draw_recoveries(self, marks: Any) -> None:
+        """A diamond in the behaviour's colour where each recovery attempt started, numbered."""
+        h, o = self._h, self.options
+        rows = [m for m in (marks or ()) if len(m) >= 4 and all(math.isfinite(float(v)) for v in m[:3])]
+        if rows:
+            xy = np.array([(float(m[0]), float(m[1])) for m in rows])
+            colors = np.array([palette.behavior_color(str(m[3])) for m in rows], np.uint8)
+            segs = geo.diamond_segments(xy, o.recovery_marker_radius, 0.02)  # (K, 4, 2, 3)
+            with self.server.atomic():
+                h["/recoveries/markers"].points = segs.reshape(-1, 2, 3)
+                h["/recoveries/markers"].colors = np.repeat(colors, 8, axis=0).reshape(-1, 2, 3)
+        for i in range(MAX_RECOVERY_LABELS):
+            name = f"/recoveries/label_{i}"
+            if i < len(rows):
+                x, y, _th, what = rows[i][:4]
+                text = f"{i + 1}. {what}"
+                if name not in h:
+                    h[name] = self.server.scene.add_label(
+                        name, text, position=(float(x), float(y), 0.25), anchor="bottom-center"
+                    )
+                else:
+                    with self.server.atomic():
+                        h[name].text = text
+                        h[name].position = (float(x), float(y), 0.25)
+                        h[name].visible = True
+            elif name in h:
+                h[name].visible = False
+            else:
+                break
+        self._set_data("/recoveries", bool(rows))
 
     def _apply_local_plan(self, snap: Snapshot) -> None:
         h, last = self._h, self._last

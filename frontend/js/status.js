@@ -1,4 +1,5 @@
 // Mode badge, mode buttons, status panel (mode, behaviour, battery, link, localization, goal), e-stop, reset.
+import { behaviorColor } from "./behaviors.js";
 import { $, api, fmt, message, onTelemetry, state } from "./core.js";
 
 const deg = (rad) => fmt((rad * 180) / Math.PI, 0);
@@ -16,8 +17,22 @@ function render(t) {
   badge.className = `badge mode-${t.mode}`;
   $("#st-mode").textContent = t.mode;
   const nav = t.navigation || null;
-  const behavior = t.behavior || (nav && nav.active ? nav.activity : null);
-  $("#st-behavior").textContent = behavior || "–";
+  // the behaviour's name on its colour (as in the 3D view), the navigator's own words beside it
+  const beh = $("#st-behavior");
+  const activity = nav && nav.active ? nav.activity : null;
+  if (t.behavior) {
+    beh.innerHTML = "";
+    const tag = document.createElement("span");
+    tag.className = "behavior-tag";
+    tag.textContent = t.behavior;
+    tag.style.background = behaviorColor(t.behavior);
+    beh.append(tag);
+    if (activity) beh.append(` ${activity}`);
+    beh.dataset.behavior = t.behavior;
+  } else {
+    beh.textContent = activity || "–";
+    delete beh.dataset.behavior;
+  }
   $("#st-pose").textContent = `x ${fmt(t.pose.x)}  y ${fmt(t.pose.y)}  θ ${deg(t.pose.theta)}°`;
   $("#st-speed").textContent = `${fmt(t.velocity.linear.x)} m/s  ${fmt(t.velocity.angular.z)} rad/s`;
   const cl = t.clamped && t.clamped.length ? ` (clamped: ${t.clamped.join(", ")})` : "";

@@ -112,7 +112,9 @@ function onKeyDown(ev) {
   if (k === "escape") { stop(); estop(); ev.preventDefault(); return; }
   if (k === " ") { stop(); ev.preventDefault(); return; }
   if (KEYMAP[k]) {
-    if (!ev.repeat) perf.keyDownAt.push(performance.timeOrigin + performance.now());
+    // when the key went down (the event's own time, epoch ms), not when this handler got to run: a busy
+    // main thread (the 3D view compiling shaders) delays handlers, and that delay is part of the latency
+    if (!ev.repeat) perf.keyDownAt.push((ev.view || window).performance.timeOrigin + ev.timeStamp);
     keys.add(k);
     setSource("keys", fromKeys(keys));
     ev.preventDefault();
