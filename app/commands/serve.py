@@ -56,9 +56,10 @@ def run(args: argparse.Namespace) -> int:
             file=sys.stderr,
         )
     host = "127.0.0.1" if settings.host in ("0.0.0.0", "::") else settings.host
+    world = f", world {runtime.world_name}" if runtime.world_name else ""  # a real robot has none
     print(
         f"navdeck: dashboard at http://{host}:{settings.port}/  (robot {settings.robot}, profile "
-        f"{runtime.profile.name}, world {runtime.world_name}, database {settings.db_url})",
+        f"{runtime.profile.name}{world}, database {settings.db_url})",
         flush=True,
     )
     app = create_app(runtime)
