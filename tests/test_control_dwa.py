@@ -28,7 +28,8 @@ from nav.control import (
 )
 from nav.control.critics import Oscillation
 from nav.control.footprint import CostWindow, FootprintModel
-from nav.control.trajectory import sample_twists, simulate_arcs, window_1d
+from nav.control.geometry import polyline_distance, project_onto_polyline
+from nav.control.trajectory import sample_twists, simulate_arcs, time_steps, window_1d
 from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
 
 SKID = DwaOptions(footprint=SKID_FOOTPRINT, min_vel_x=-0.15)
@@ -248,6 +249,35 @@ def test_oscillation_critic_forbids_flipping_back_until_moved() -> None:
     assert not crit.theta.flipped
 
 
+def test_oscillation_ignores_near_stops_and_releases_a_stalled_robot() -> None:
+    crit = Oscillation(SKID)
+    p = Pose2D()
+    crit.debrief(Twist2D(0.1, 0.0, 0.0), p)
+    crit.debrief(Twist2D(-0.001, 0.0, 0.0), p)  # inside the deadband: not a direction
+    assert not crit.x.flipped
+    crit.debrief(Twist2D(-0.1, 0.0, 0.0), p)  # a real reversal: forward is vetoed
+    assert crit.x.oscillating(np.array([0.1])).all()
+    # the robot now only stops (forward vetoed, backward worse): it never moves reset_dist, so
+    # after oscillation_stall_reset_time of stops under the veto the flags reset
+    cycles = math.ceil(SKID.oscillation_stall_reset_time / SKID.sim_period)
+    for i in range(cycles):
+        assert crit.x.flipped, i
+        crit.vetoed = True  # what score() records when it rejects trajectories
+        crit.debrief(Twist2D(0.0, 0.0, 0.0), p)
+    assert not crit.x.flipped
+    # creeping too slowly to move reset_dist in that time counts as stalled too
+    crit.debrief(Twist2D(0.1, 0.0, 0.0), p)
+    crit.debrief(Twist2D(-0.1, 0.0, 0.0), p)
+    for _ in range(cycles - 1):
+        crit.vetoed = True
+        crit.debrief(Twist2D(-0.02, 0.0, 0.0), p)
+    assert crit.x.flipped  # not yet: one cycle short
+    crit.debrief(Twist2D(-0.1, 0.0, 0.0), p)  # a real move restarts the count
+    crit.vetoed = True
+    crit.debrief(Twist2D(-0.02, 0.0, 0.0), p)
+    assert crit.x.flipped
+
+
 # --- closed loop ------------------------------------------------------------------------------------
 
 
@@ -335,7 +365,82 @@ def test_path_and_goal_critics_measure_cells_to_the_path_and_local_goal() -> Non
     assert np.allclose(dbg.critic_costs["PathDist"], expected_path, atol=0.26 * SKID.path_dist_scale)
     local_goal = dbg.local_path[-1]
     assert local_goal[0] == pytest.approx(3.5)  # forward_prune_distance = 2 m past the nearest vertex
-    expected_goal = (
-        np.hypot(end[:, 0] - local_goal[0], end[:, 1] - local_goal[1]) / RES * SKID.goal_dist_scale
-    )
+    # along the path: to the straight path (|y - 3|), then the rest of it to the local goal
+    expected_goal = (np.abs(end[:, 1] - 3.0) + (local_goal[0] - end[:, 0])) / RES * SKID.goal_dist_scale
     assert np.allclose(dbg.critic_costs["GoalDist"], expected_goal, rtol=1e-4)
+
+
+def test_goal_distance_follows_the_path_round_a_wall_end() -> None:
+    """The local goal lies behind a wall the path bends round: a trajectory towards the wall gets
+    nearer the goal in a straight line but not along the path, so GoalDist must not prefer it."""
+    cm = inflate(box(room(), 2.0, 2.45, 2.1, 5.0), inscribed=0.1)  # a wall from y 2.45 up, x 2.0..2.1
+    path = np.array([[1.5, 2.6], [1.7, 2.2], [2.05, 2.1], [2.4, 2.2], [2.6, 2.6], [2.6, 3.2]])
+    segs = [np.linspace(a, b, 10, endpoint=False) for a, b in itertools.pairwise(path)]
+    dense = np.vstack((*segs, path[-1]))
+    ctl = DwaController(SKID)
+    ctl.set_path(Path(np.column_stack((dense, np.zeros(len(dense))))))
+    _, dbg = ctl.compute(Pose2D(1.5, 2.6, 0.0), Twist2D(0.0, 0.0, 0.0), cm)
+    end = dbg.trajectories[:, -1, :].astype(float)
+    g = dbg.local_path[-1]
+    toward_goal = np.argmin(np.hypot(end[:, 0] - g[0], end[:, 1] - g[1]))  # straight at the wall
+    along = np.argmin(np.hypot(end[:, 0] - 1.7, end[:, 1] - 2.2) + 10 * (dbg.twists[:, 0] < 0.05))
+    assert dbg.critic_costs["GoalDist"][along] < dbg.critic_costs["GoalDist"][toward_goal]
+
+
+def test_path_projection_is_exact_and_extends_behind_the_start() -> None:
+    poly = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]])
+    pts = np.array([[0.5, 0.2], [1.3, 0.5], [-0.5, 0.1], [2.0, 2.0]])
+    d, d_ext, s = project_onto_polyline(pts, poly)
+    assert np.allclose(d_ext, [0.2, 0.3, 0.1, math.hypot(1.0, 1.0)])
+    assert np.allclose(s, [0.5, 1.5, -0.5, 2.0])
+    assert np.allclose(d, [0.2, 0.3, math.hypot(0.5, 0.1), math.hypot(1.0, 1.0)])
+    assert np.array_equal(polyline_distance(pts, poly), d)
+
+
+def test_footprint_step_spaces_poses_by_the_footprint_sweep() -> None:
+    tw = np.array([[0.26, 0.0, 1.0], [0.0, 0.0, -1.0]])
+    r = SKID.circumscribed_radius
+    n = len(time_steps(SKID, tw)) - 1
+    assert n == math.ceil((0.26 + r * 1.0) * SKID.sim_time / SKID.linear_granularity)
+    poses = simulate_arcs(Pose2D(), tw, time_steps(SKID, tw))
+    corners = np.asarray(SKID_FOOTPRINT)
+    for k in range(2):  # no footprint corner moves more than linear_granularity between poses
+        c, s = np.cos(poses[k, :, 2]), np.sin(poses[k, :, 2])
+        wx = poses[k, :, 0, None] + c[:, None] * corners[:, 0] - s[:, None] * corners[:, 1]
+        wy = poses[k, :, 1, None] + s[:, None] * corners[:, 0] + c[:, None] * corners[:, 1]
+        assert np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)).max() <= SKID.linear_granularity + 1e-9
+    dwb = DwaOptions(footprint=SKID_FOOTPRINT, footprint_step=False)
+    assert len(time_steps(dwb, tw)) - 1 == min(math.ceil(1.7 / dwb.angular_granularity), dwb.max_steps)
+
+
+def test_footprint_already_touching_a_chair_leg_may_back_or_turn_out_but_not_deeper() -> None:
+    """A 5 cm leg inside the footprint's front corner (a return marked a cell too close): DWB
+    rejects every trajectory; the escape rule keeps those that never reach deeper into it."""
+    occ = room()
+    leg = (round(3.0 / RES) + 1, round(3.0 / RES) + 2)  # (row, col): centre at (3.125, 3.075)
+    occ[leg] = True
+    cm = inflate(occ, inscribed=0.1)
+    leg_xy = np.array([(leg[1] + 0.5) * RES, (leg[0] + 0.5) * RES])
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(3.0, 3.0, 5.0, 3.0))
+    pose = Pose2D(3.02, 3.0, 0.0)  # the leg's centre 1.5 cm inside the front edge (x 0.12 m)
+    cmd, dbg = ctl.compute(pose, Twist2D(), cm)
+    crit = next(c for c in ctl.critics if c.name == "ObstacleFootprint")
+    assert crit.escaping
+    assert dbg.legal.any() and not dbg.legal.all()
+
+    def depth(k: int) -> np.ndarray:  # how far the leg's centre is inside the 0.24 x 0.20 m box
+        t = np.linspace(0.0, SKID.sim_time, dbg.trajectories.shape[1])
+        th = pose.theta + dbg.twists[k, 2] * t
+        d = leg_xy - dbg.trajectories[k].astype(float)
+        x = np.cos(th) * d[:, 0] + np.sin(th) * d[:, 1]
+        y = -np.sin(th) * d[:, 0] + np.cos(th) * d[:, 1]
+        return np.clip(np.minimum(0.12 - np.abs(x), 0.10 - np.abs(y)), 0.0, None)
+
+    start = depth(0)[0]
+    assert start > 0.0
+    for k in np.flatnonzero(dbg.legal):
+        assert (depth(k) <= start + 1e-3).all()  # float32 trajectories: a mm of slack
+    ahead = np.flatnonzero((dbg.twists[:, 0] > 0.1) & (np.abs(dbg.twists[:, 2]) < 1e-9))
+    assert ahead.size and not dbg.legal[ahead].any()  # straight on into the leg is not allowed
+    assert cmd.vx <= 0.0 or abs(cmd.wz) > 0.0

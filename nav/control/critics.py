@@ -6,9 +6,11 @@ illegal (DWB's ``IllegalTrajectoryException``); the controller minimises sum(sca
 legal ones. Distances are in costmap cells, as in DWB, so its default scales keep their balance.
 
 Differences from DWB, and why:
-- PathDist / GoalDist measure Euclidean distance to the path (a KD-tree over the path resampled
-  every half cell) / to the local goal, instead of a breadth-first Manhattan distance through the
-  grid: no per-cell queue, and obstacles are already handled by the obstacle critics.
+- PathDist measures exact Euclidean distance to the path's segments and GoalDist / GoalAlign the
+  distance to the local goal *along the path* (nearest path point + remaining length; a compiled
+  point-to-polyline loop), instead of DWB's breadth-first Manhattan wavefront through the grid: no
+  per-cell queue, and like the wavefront it goes round the wall ends the path bends round (a
+  straight line to a local goal behind a wall parks the robot at the wall).
 - The alignment and distance critics are silenced once the robot is inside ``xy_goal_tolerance``
   (DWB silences PathAlign/GoalAlign only within ``forward_point_distance``); otherwise they fight
   RotateToGoal over the heading, the usual cause of DWB's oscillation at the goal.
@@ -25,12 +27,13 @@ from functools import cached_property
 from typing import Protocol
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from nav.control.footprint import CostWindow, FootprintModel
+from nav.control.footprint import _inside_polygon as _inside
+from nav.control.geometry import project_onto_polyline
 from nav.control.options import DwaOptions
 from nav.control.trajectory import TrajectorySet
-from nav.types import INSCRIBED_INFLATED_OBSTACLE, Pose2D, Twist2D, wrap_angle
+from nav.types import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, Pose2D, Twist2D, wrap_angle
 
 
 @dataclass
@@ -47,6 +50,7 @@ class CriticContext:
     goal: Pose2D  # last pose of the whole path
     in_goal_window: bool  # latched: the robot has come within xy_goal_tolerance of the goal
     resolution: float = field(init=False)
+    _projections: dict[float, tuple[np.ndarray, ...]] = field(init=False, default_factory=dict)
 
     def __post_init__(self) -> None:
         self.resolution = self.window.geometry.resolution
@@ -69,23 +73,32 @@ class CriticContext:
     def centre_costs(self) -> np.ndarray:
         return self.window.centre_costs(self.future)
 
-    @cached_property
-    def path_tree(self) -> cKDTree:
-        """KD-tree of the local path resampled every half cell: distance queries to the path are
-        then exact to a quarter cell (DWB itself measures in whole cells)."""
-        xy = self.local_path[:, :2]
-        if xy.shape[0] > 1:
-            seg = np.hypot(*np.diff(xy, axis=0).T)
-            s = np.concatenate(([0.0], np.cumsum(seg)))
-            n = max(int(s[-1] / (0.5 * self.resolution)) + 1, 2)
-            si = np.linspace(0.0, s[-1], n)
-            xy = np.column_stack((np.interp(si, s, xy[:, 0]), np.interp(si, s, xy[:, 1])))
-        return cKDTree(xy)
+    def _projection(self, forward: float) -> tuple[np.ndarray, ...]:
+        """``project_onto_polyline`` of the trajectories' last poses moved ``forward`` m along
+        their heading (0: the last poses), once per cycle for all critics asking for it."""
+        key = round(forward, 9)
+        hit = self._projections.get(key)
+        if hit is None:
+            pts = self.last[:, :2] if key == 0.0 else self.forward_points(self.last, forward)
+            hit = self._projections[key] = project_onto_polyline(pts, self.local_path)
+        return hit
 
-    def path_distance(self, points: np.ndarray) -> np.ndarray:
-        """Distance (m) from (N, 2) points to the local path."""
-        d, _ = self.path_tree.query(points)
-        return np.asarray(d, dtype=np.float64)
+    def path_distance(self, forward: float = 0.0) -> np.ndarray:
+        """Exact distance (m) from the (forward points of the) trajectory ends to the local path."""
+        return self._projection(forward)[0]
+
+    @cached_property
+    def path_length(self) -> float:
+        seg = np.diff(self.local_path[:, :2], axis=0)
+        return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+
+    def distance_to_go(self, forward: float = 0.0) -> np.ndarray:
+        """Distance (m) from the (forward points of the) trajectory ends to the local goal *along
+        the path*: to the nearest path point, then the path's remaining length. DWB gets the same
+        effect from a wavefront through the grid (it goes round walls); a straight line to a local
+        goal behind a wall end would pull the robot into the corner the path bends round."""
+        _, d, s = self._projection(forward)
+        return d + (self.path_length - s)
 
     @cached_property
     def footprint_lethal(self) -> np.ndarray:
@@ -159,17 +172,67 @@ class BaseObstacle(_Stateless):
 
 class ObstacleFootprint(_Stateless):
     """Max cost under the footprint (last pose); a footprint touching a lethal cell anywhere along
-    the trajectory makes it illegal. DWB ``ObstacleFootprintCritic``."""
+    the trajectory makes it illegal. DWB ``ObstacleFootprintCritic``.
+
+    Escape (navdeck): when the footprint already overlaps a lethal cell where the robot stands
+    (a 4 cm chair leg marked a cell too close, localisation jitter against a wall), DWB rejects
+    every trajectory and the robot is stuck for good. When a lethal cell's centre lies inside the
+    polygon, a trajectory is legal if it never reaches deeper into an obstacle than now (the
+    farthest a nearby lethal cell's centre lies inside the polygon, in m): turning in place or
+    backing out of the contact is allowed, pushing on is not."""
 
     name = "ObstacleFootprint"
 
     def __init__(self, options: DwaOptions) -> None:
         super().__init__(options)
         self.scale = options.obstacle_footprint_scale
+        self.escaping = False  # whether the last score used the escape rule
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
-        illegal = np.any(ctx.footprint_lethal, axis=1)
-        return ctx.last_footprint_costs.astype(np.float64), illegal
+        cost = ctx.last_footprint_costs.astype(np.float64)
+        hit = ctx.footprint_lethal
+        start = ctx.trajectories.poses[:1, :1]  # every trajectory starts at the robot's pose
+        touching = bool(hit.any()) and bool(ctx.window.footprint_lethal(start, ctx.footprint)[0, 0])
+        depth = self._depth(ctx) if touching else None  # (K, T)
+        # only a real overlap (a lethal cell's centre inside the polygon) escapes; a footprint that
+        # merely touches by the raster's conservative margin keeps DWB's strict rule
+        self.escaping = depth is not None and depth[0, 0] > 0.0
+        if not self.escaping:
+            return cost, np.any(hit, axis=1)
+        assert depth is not None
+        deeper = depth[:, 1:] > depth[:, :1] + 1e-9
+        return cost, np.any(deeper, axis=1)
+
+    def _depth(self, ctx: CriticContext) -> np.ndarray:
+        """(K, T) how far (m) the lethal cells near the robot reach into the footprint polygon at
+        each pose: the largest distance from a covered cell's centre to the outline (0: none)."""
+        w, poses = ctx.window, ctx.trajectories.poses
+        reach = ctx.footprint.circumscribed + float(np.abs(poses[..., :2] - poses[:1, :1, :2]).max())
+        rr, cc = np.nonzero(w.costs >= LETHAL_OBSTACLE)
+        cells = w.geometry.cell_to_world(rr, cc)
+        near = np.hypot(cells[:, 0] - ctx.pose.x, cells[:, 1] - ctx.pose.y) <= reach + w.geometry.resolution
+        cells = cells[near]
+        if cells.shape[0] == 0:
+            return np.zeros(poses.shape[:2])
+        poly = self._polygon()
+        # cell centres in each pose's frame: (K, T, L, 2)
+        dx = cells[None, None, :, 0] - poses[..., 0:1]
+        dy = cells[None, None, :, 1] - poses[..., 1:2]
+        c, s = np.cos(poses[..., 2:3]), np.sin(poses[..., 2:3])
+        pts = np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1).reshape(-1, 2)
+        a, b = poly, np.roll(poly, -1, axis=0)
+        ab = b - a
+        t = np.clip(((pts[:, None, :] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
+        edge = np.hypot(*(a + t[..., None] * ab - pts[:, None, :]).transpose(2, 0, 1)).min(axis=1)
+        inside = _inside(pts, poly)
+        return np.where(inside, edge, 0.0).reshape(poses.shape[0], poses.shape[1], -1).max(axis=2)
+
+    def _polygon(self) -> np.ndarray:
+        o = self.options
+        if o.footprint:
+            return np.asarray(o.footprint, dtype=float)
+        a = np.linspace(0.0, 2 * math.pi, 16, endpoint=False)
+        return o.robot_radius * np.column_stack((np.cos(a), np.sin(a)))
 
 
 class PathDist(_Stateless):
@@ -185,7 +248,7 @@ class PathDist(_Stateless):
         return 0.0 if ctx.in_goal_window else self.scale
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
-        d = ctx.path_distance(ctx.last[:, :2]) / ctx.resolution
+        d = ctx.path_distance() / ctx.resolution
         return d, self._legal(d.shape[0])
 
 
@@ -206,14 +269,14 @@ class PathAlign(_Stateless):
         return self.scale
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
-        p = ctx.forward_points(ctx.last, self.forward)
-        d = ctx.path_distance(p) / ctx.resolution
+        d = ctx.path_distance(self.forward) / ctx.resolution
         return d, self._legal(d.shape[0])
 
 
 class GoalDist(_Stateless):
     """Distance (cells) from the trajectory's end to the local goal (the end of the path segment
-    the controller sees). DWB ``GoalDistCritic``."""
+    the controller sees), measured along the path (``CriticContext.distance_to_go``). DWB
+    ``GoalDistCritic``."""
 
     name = "GoalDist"
 
@@ -225,14 +288,14 @@ class GoalDist(_Stateless):
         return 0.0 if ctx.in_goal_window else self.scale
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
-        g = ctx.local_goal
-        d = np.hypot(ctx.last[:, 0] - g[0], ctx.last[:, 1] - g[1]) / ctx.resolution
+        d = ctx.distance_to_go() / ctx.resolution
         return d, self._legal(d.shape[0])
 
 
 class GoalAlign(_Stateless):
-    """Distance (cells) from the forward point of the trajectory's end to the local goal: rewards
-    facing the goal. DWB ``GoalAlignCritic``; off near the goal."""
+    """Distance (cells) from the forward point of the trajectory's end to the local goal, along
+    the path like GoalDist: rewards facing the way the path goes. DWB ``GoalAlignCritic``; off near
+    the goal."""
 
     name = "GoalAlign"
 
@@ -247,9 +310,7 @@ class GoalAlign(_Stateless):
         return self.scale
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
-        p = ctx.forward_points(ctx.last, self.forward)
-        g = ctx.local_goal
-        d = np.hypot(p[:, 0] - g[0], p[:, 1] - g[1]) / ctx.resolution
+        d = ctx.distance_to_go(self.forward) / ctx.resolution
         return d, self._legal(d.shape[0])
 
 
@@ -304,8 +365,10 @@ class _Trend:
         self.positive_only = False
         self.negative_only = False
 
-    def update(self, v: float) -> bool:
+    def update(self, v: float, deadband: float = 0.0) -> bool:
         flipped = False
+        if abs(v) <= deadband:
+            return False
         if v < 0.0:
             if self.sign > 0:
                 self.negative_only = flipped = True
@@ -328,7 +391,11 @@ class Oscillation:
     """After a command axis changes sign, commands of the old sign are illegal until the robot has
     moved ``oscillation_reset_dist`` or turned ``oscillation_reset_angle`` (or
     ``oscillation_reset_time`` passed). y and theta trends only update while |vx| is below
-    ``x_only_threshold``. DWB ``OscillationCritic``."""
+    ``x_only_threshold``. DWB ``OscillationCritic``, plus two navdeck rules against its deadlock
+    (a robot that flipped to a -0.001 m/s sample may never drive forward again, so it stops, never
+    moves ``reset_dist`` and stays vetoed): commands inside ``oscillation_deadband`` do not count
+    as a direction, and ``oscillation_stall_reset_time`` of commands too slow to clear the flags by
+    motion in that time, chosen under a veto, resets them."""
 
     name = "Oscillation"
 
@@ -338,6 +405,8 @@ class Oscillation:
         self.x, self.y, self.theta = _Trend(), _Trend(), _Trend()
         self.anchor: Pose2D | None = None
         self.anchor_cycles = 0
+        self.vetoed = False  # whether the last score made any trajectory illegal
+        self.stall_cycles = 0  # consecutive chosen stops while vetoing
 
     def weight(self, ctx: CriticContext) -> float:
         return self.scale
@@ -347,20 +416,33 @@ class Oscillation:
             t.reset()
         self.anchor = None
         self.anchor_cycles = 0
+        self.vetoed = False
+        self.stall_cycles = 0
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
         tw = ctx.trajectories.twists
         illegal = (
             self.x.oscillating(tw[:, 0]) | self.y.oscillating(tw[:, 1]) | self.theta.oscillating(tw[:, 2])
         )
+        self.vetoed = bool(illegal.any())
         return np.zeros(tw.shape[0]), illegal
 
     def debrief(self, cmd: Twist2D, pose: Pose2D) -> None:
         o = self.options
-        flagged = self.x.update(cmd.vx)
+        band = o.oscillation_deadband
+        # stalled: too slow to clear the flags by motion (reset_dist / reset_angle) within the
+        # stall time, while the veto is in force
+        t = o.oscillation_stall_reset_time
+        slow = math.hypot(cmd.vx, cmd.vy) * t < o.oscillation_reset_dist
+        slow = slow and abs(cmd.wz) * t < o.oscillation_reset_angle
+        self.stall_cycles = self.stall_cycles + 1 if slow and self.vetoed else 0
+        if 0 < t <= self.stall_cycles * o.sim_period:
+            self.reset()
+            return
+        flagged = self.x.update(cmd.vx, band)
         if abs(cmd.vx) <= o.oscillation_x_only_threshold:
-            flagged |= self.y.update(cmd.vy)
-            flagged |= self.theta.update(cmd.wz)
+            flagged |= self.y.update(cmd.vy, band)
+            flagged |= self.theta.update(cmd.wz, band)
         if flagged:
             self.anchor, self.anchor_cycles = pose, 0
             return

@@ -23,7 +23,7 @@ from nav.control.errors import ControllerError, InvalidPath, NoValidControl, Pat
 from nav.control.footprint import CostWindow, FootprintModel
 from nav.control.options import DwaOptions
 from nav.control.trajectory import TrajectorySet, generate
-from nav.types import Costmap, Path, Pose2D, Twist2D
+from nav.types import ZERO_TWIST, Costmap, Path, Pose2D, Twist2D
 
 
 @dataclass(frozen=True)
@@ -195,6 +195,8 @@ class DwaController:
         )
         self.last_debug = debug
         if chosen < 0:
+            for critic in self.critics:  # the robot is stopped this cycle: stateful critics see it
+                critic.debrief(ZERO_TWIST, pose)
             self._fail_cycles += 1
             why = ", ".join(f"{n}: {c}" for n, c in rejections.items()) or "no samples"
             if self._fail_cycles * o.sim_period > o.failure_tolerance:

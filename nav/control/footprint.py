@@ -2,9 +2,10 @@
 
 Nav2's ``ObstacleFootprintCritic`` rasterises the footprint's edges for every pose. Here the filled
 footprint is rasterised once per heading bin into a list of cell offsets (the union over the bin's
-heading range, so it is conservative in heading), and a pose's footprint cost is one fancy-indexed
-gather of those offsets around the pose's cell (poses snap to their cell: error <= half a cell, the
-planner's own discretisation). For the "does it touch a lethal cell" test, the Euclidean distance
+heading range, so it is conservative in heading), and a pose's footprint cost is the maximum over
+those offsets around the pose's cell (poses snap to their cell: error <= half a cell, the planner's
+own discretisation), a small compiled loop that stops at the first lethal cell when only a
+collision matters. For the "does it touch a lethal cell" test, the Euclidean distance
 transform of the lethal cells first clears every pose farther than the circumscribed radius from
 any obstacle, so only the few poses near obstacles are gathered. A round robot needs one bin, and
 its collision test is the distance transform alone.
@@ -16,6 +17,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from scipy import ndimage
 
 from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, Costmap, GridGeometry, Pose2D
@@ -56,6 +58,27 @@ def rasterize(polygon: np.ndarray, resolution: float, angles: np.ndarray) -> np.
         )
     rr, cc = np.nonzero(mask)
     return np.column_stack((rr - r, cc - r))
+
+
+@njit(cache=True, nogil=True)
+def _max_under(
+    costs: np.ndarray, rows: np.ndarray, cols: np.ndarray, bins: np.ndarray, offsets: np.ndarray, stop: int
+) -> np.ndarray:
+    """Max of ``costs`` over each pose's binned footprint offsets; a pose's scan ends early once
+    it reaches ``stop`` (255: never for uint8 costs below it). One pass, no (N, P) temporaries."""
+    n, p = rows.shape[0], offsets.shape[1]
+    out = np.zeros(n, dtype=np.uint8)
+    for i in range(n):
+        r, c, off = rows[i], cols[i], offsets[bins[i]]
+        best = costs[r + off[0, 0], c + off[0, 1]]
+        for j in range(1, p):
+            v = costs[r + off[j, 0], c + off[j, 1]]
+            if v > best:
+                best = v
+                if best >= stop:
+                    break
+        out[i] = best
+    return out
 
 
 @dataclass(frozen=True)
@@ -137,17 +160,18 @@ class CostWindow:
         rows, cols = self.cells(poses)
         return self.costs[rows, cols]
 
+    def _bins(self, theta: np.ndarray, model: FootprintModel) -> np.ndarray:
+        if model.bins == 1:
+            return np.zeros(theta.shape, dtype=np.int64)
+        b = np.rint((theta - self.geometry.origin.theta) * (model.bins / (2.0 * math.pi))).astype(np.int64)
+        return b % model.bins
+
     def _gather(
         self, rows: np.ndarray, cols: np.ndarray, theta: np.ndarray, model: FootprintModel
     ) -> np.ndarray:
         """(N,) max cost under the footprint at flat (N,) cells and headings."""
-        if model.bins == 1:
-            off = model.offsets[0][None]
-        else:
-            b = np.rint((theta - self.geometry.origin.theta) / (2.0 * math.pi / model.bins)).astype(np.int64)
-            off = model.offsets[b % model.bins]  # (N, P, 2)
         # no clipping needed: ``around`` pads the crop by more than the footprint's reach
-        return self.costs[rows[:, None] + off[..., 0], cols[:, None] + off[..., 1]].max(axis=1)
+        return _max_under(self.costs, rows, cols, self._bins(theta, model), model.offsets, 255)
 
     def footprint_costs(self, poses: np.ndarray, model: FootprintModel) -> np.ndarray:
         """Max cost under the footprint at each pose, shape ``poses.shape[:-1]``."""
@@ -181,7 +205,10 @@ class CostWindow:
         out = np.zeros(rows.shape[0], dtype=bool)
         if near.size:
             theta = poses[..., 2].ravel()[near]
-            out[near] = self._gather(rows[near], cols[near], theta, model) >= LETHAL_OBSTACLE
+            b = self._bins(theta, model)
+            # stop at the first lethal cell: "touches" needs no maximum
+            hit = _max_under(self.costs, rows[near], cols[near], b, model.offsets, LETHAL_OBSTACLE)
+            out[near] = hit >= LETHAL_OBSTACLE
         return out.reshape(poses.shape[:-1])
 
     def clearance(self, poses: np.ndarray) -> np.ndarray:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields, replace
+from functools import cached_property
 from typing import Any
 
 #: DWB's critic list in ``nav2_params.yaml``, with ``ObstacleFootprint`` instead of ``BaseObstacle``
@@ -86,6 +87,9 @@ class DwaOptions:
     """Largest distance between simulated poses, m. Nav2 0.05."""
     angular_granularity: float = 0.025
     """Largest rotation between simulated poses, rad. Nav2 0.025."""
+    footprint_step: bool = True
+    """Space poses by the footprint's sweep (travel + circumscribed radius x turn) against
+    ``linear_granularity`` instead of by ``angular_granularity`` (navdeck; see ``time_steps``)."""
     max_steps: int = 60
     """Cap on simulated steps per trajectory (navdeck; keeps one cycle's cost bounded)."""
     controller_frequency: float = 20.0
@@ -156,6 +160,15 @@ class DwaOptions:
     """Oscillation.oscillation_reset_time, s; negative: never. Nav2 -1.0."""
     oscillation_x_only_threshold: float = 0.05
     """Oscillation.x_only_threshold, m/s: y and theta trends only count below this |vx|. Nav2 0.05."""
+    oscillation_deadband: float = 0.01
+    """Commands slower than this (m/s, rad/s per axis) neither set nor flip a trend: a near-stop
+    has no direction (navdeck; DWB counts any sign, so a -0.001 m/s sample can forbid forward)."""
+    oscillation_stall_reset_time: float = 1.0
+    """Seconds of choosing only commands too slow to move ``oscillation_reset_dist`` or turn
+    ``oscillation_reset_angle`` in that time, while the Oscillation critic vetoes trajectories,
+    after which its flags reset: the veto then holds a stalled robot in place rather than
+    preventing a dither (navdeck; DWB's flags only reset by motion, which a stalled robot never
+    makes). <= 0: never."""
     fox_heading_scale: float = 2.0
     """Fox's alpha (heading term weight). Fox et al. 1997 use 2.0."""
     fox_clearance_scale: float = 0.2
@@ -188,7 +201,7 @@ class DwaOptions:
         """Control period (s): the acceleration time of the dynamic window."""
         return 1.0 / self.controller_frequency
 
-    @property
+    @cached_property
     def circumscribed_radius(self) -> float:
         if not self.footprint:
             return self.robot_radius

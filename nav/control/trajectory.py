@@ -18,6 +18,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from nav.control.options import DwaOptions
 from nav.types import Pose2D, Twist2D
@@ -39,14 +40,18 @@ def window_1d(
     lo = max(v_min, v0 - down * dt)
     if hi < lo:  # current velocity outside the limits: pull it back towards them
         hi = lo = min(max(v0, v_min), v_max)
+    # plain floats: ~20 values, where numpy's per-call overhead would cost more than the work
     if samples <= 1 or hi - lo < 1e-12:
-        vals = np.array([0.5 * (lo + hi)])
+        vals = [0.5 * (lo + hi)]
     else:
-        vals = np.linspace(lo, hi, samples)
-        vals[np.abs(vals) < 1e-12 * max(abs(lo), abs(hi), 1.0)] = 0.0  # linspace round-off near zero
-    if lo <= 0.0 <= hi:
-        vals = np.union1d(vals, [0.0])
-    return vals
+        step = (hi - lo) / (samples - 1)
+        tiny = 1e-12 * max(abs(lo), abs(hi), 1.0)
+        vals = [lo + i * step for i in range(samples - 1)] + [hi]
+        vals = [0.0 if abs(v) < tiny else v for v in vals]  # round-off near zero
+    if lo <= 0.0 <= hi and 0.0 not in vals:
+        vals.append(0.0)
+        vals.sort()
+    return np.array(vals)
 
 
 def sample_twists(options: DwaOptions, velocity: Twist2D) -> np.ndarray:
@@ -68,21 +73,35 @@ def sample_twists(options: DwaOptions, velocity: Twist2D) -> np.ndarray:
         dt,
         o.vtheta_samples,
     )
-    grid = np.stack(np.meshgrid(vx, vy, wz, indexing="ij"), axis=-1).reshape(-1, 3)
+    grid = np.empty((vx.size, vy.size, wz.size, 3))
+    grid[..., 0] = vx[:, None, None]
+    grid[..., 1] = vy[None, :, None]
+    grid[..., 2] = wz[None, None, :]
+    grid = grid.reshape(-1, 3)
     speed_sq = grid[:, 0] ** 2 + grid[:, 1] ** 2
-    ok = np.ones(grid.shape[0], dtype=bool)
+    w_abs = np.abs(grid[:, 2])
+    bad = (speed_sq < o.min_speed_xy**2) & (w_abs < o.min_speed_theta)
+    bad |= (speed_sq == 0.0) & (w_abs == 0.0)
     if o.max_speed_xy > 0:
-        ok &= speed_sq <= o.max_speed_xy**2 + 1e-12
-    ok &= ~((speed_sq < o.min_speed_xy**2) & (np.abs(grid[:, 2]) < o.min_speed_theta))
-    ok &= ~((speed_sq == 0.0) & (grid[:, 2] == 0.0))
-    return grid[ok]
+        bad |= speed_sq > o.max_speed_xy**2 + 1e-12
+    return grid[~bad]
 
 
 def time_steps(options: DwaOptions, twists: np.ndarray) -> np.ndarray:
-    """Sample times (T,), from 0 to ``sim_time`` inclusive, fine enough for every twist."""
+    """Sample times (T,), from 0 to ``sim_time`` inclusive, fine enough for every twist.
+
+    DWB steps every ``linear_granularity`` of travel or ``angular_granularity`` of turn. With
+    ``footprint_step`` a turn is measured instead by how far it moves the footprint's farthest point
+    (circumscribed radius x angle), added to the travel: the footprint check is heading-binned
+    (``footprint_orientation_bins``), so headings finer than a point moving one
+    ``linear_granularity`` change nothing it sees, and a 1 rad/s sample needs ~15 poses, not 60.
+    """
     o = options
     if o.discretize_by_time:
         n = math.ceil(o.sim_time / o.time_granularity)
+    elif o.footprint_step:
+        sweep = np.hypot(twists[:, 0], twists[:, 1]) + o.circumscribed_radius * np.abs(twists[:, 2])
+        n = math.ceil(float(np.max(sweep, initial=0.0)) * o.sim_time / o.linear_granularity)
     else:
         lin = float(np.max(np.hypot(twists[:, 0], twists[:, 1]), initial=0.0)) * o.sim_time
         ang = float(np.max(np.abs(twists[:, 2]), initial=0.0)) * o.sim_time
@@ -91,34 +110,38 @@ def time_steps(options: DwaOptions, twists: np.ndarray) -> np.ndarray:
     return np.linspace(0.0, o.sim_time, n + 1)
 
 
+@njit(cache=True, nogil=True)
+def _arcs(x0: float, y0: float, th0: float, twists: np.ndarray, times: np.ndarray, out: np.ndarray) -> None:
+    c0, s0 = math.cos(th0), math.sin(th0)
+    for k in range(twists.shape[0]):
+        vx, vy, w = twists[k, 0], twists[k, 1], twists[k, 2]
+        straight = abs(w) < 1e-9
+        for j in range(times.shape[0]):
+            t = times[j]
+            a = w * t
+            if straight:  # the w -> 0 limits
+                s, c = t, 0.5 * a * t
+            else:
+                s, c = math.sin(a) / w, (1.0 - math.cos(a)) / w
+            bx = vx * s - vy * c
+            by = vx * c + vy * s
+            out[k, j, 0] = x0 + c0 * bx - s0 * by
+            out[k, j, 1] = y0 + s0 * bx + c0 * by
+            out[k, j, 2] = th0 + a
+
+
 def simulate_arcs(pose: Pose2D, twists: np.ndarray, times: np.ndarray) -> np.ndarray:
     """(K, T, 3) world poses of constant body twists (K, 3) from ``pose`` at ``times`` (T,).
 
     Closed form of the holonomic unicycle (source C's kinematics, constant body velocity):
     in the start frame x(t) = (vx sin wt - vy (1 - cos wt)) / w, y(t) = (vx (1 - cos wt) + vy sin wt) / w,
-    with the w -> 0 limits (t and w t^2 / 2) for straight-line samples.
+    with the w -> 0 limits (t and w t^2 / 2) for straight-line samples. A compiled loop: one pass
+    without the (K, T) temporaries numpy would allocate for each term.
     """
-    vx = twists[:, 0:1]
-    vy = twists[:, 1:2]
-    w = twists[:, 2:3]
-    t = times[None, :]
-    a = w * t  # (K, T) heading change
-    small = np.abs(w[:, 0]) < 1e-9
-    inv_w = 1.0 / np.where(small[:, None], 1.0, w)
-    s = np.sin(a)
-    s *= inv_w  # sin(wt)/w
-    c = 1.0 - np.cos(a)
-    c *= inv_w  # (1 - cos wt)/w
-    if small.any():  # straight-line samples: the w -> 0 limits
-        s[small] = t
-        c[small] = 0.5 * a[small] * t
-    bx = vx * s - vy * c
-    by = vx * c + vy * s
-    c0, s0 = math.cos(pose.theta), math.sin(pose.theta)
-    out = np.empty((twists.shape[0], times.shape[0], 3))
-    out[..., 0] = pose.x + c0 * bx - s0 * by
-    out[..., 1] = pose.y + s0 * bx + c0 * by
-    out[..., 2] = pose.theta + a
+    tw = np.ascontiguousarray(twists, dtype=np.float64)
+    ts = np.ascontiguousarray(times, dtype=np.float64)
+    out = np.empty((tw.shape[0], ts.shape[0], 3))
+    _arcs(float(pose.x), float(pose.y), float(pose.theta), tw, ts, out)
     return out
 
 

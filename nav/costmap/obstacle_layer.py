@@ -1,9 +1,10 @@
 """Obstacle layer: lidar returns marked as lethal, free space cleared along each beam, as Nav2's
 ``nav2_costmap_2d::ObstacleLayer`` (``raytraceFreespace`` then marking, per observation).
 
-Clearing traces every beam at once with ``nav.raycast.traversed_cells`` (Amanatides & Woo
-supercover, vectorized), stopping before the cell that holds the return (Nav2's Bresenham also stops
-one cell short) and at ``raytrace_max_range``; marking sets the cells of returns within
+Clearing walks every beam's cells with ``nav.costmap.raytrace.clear_segments`` (Amanatides & Woo
+supercover, compiled; the cells ``nav.raycast.traversed_cells`` lists), stopping before the cell
+that holds the return (Nav2's Bresenham also stops one cell short) and at
+``raytrace_max_range``; marking sets the cells of returns within
 ``obstacle_max_range`` to LETHAL. Clearing runs before marking, so a return always survives its own
 scan, and the layer keeps its state between scans (obstacles persist until a beam passes through).
 """
@@ -14,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nav.raycast import traversed_cells
+from nav.costmap.raytrace import clear_segments
 from nav.types import FREE_SPACE, LETHAL_OBSTACLE, NO_INFORMATION, GridGeometry
 
 Bounds = tuple[int, int, int, int]
@@ -121,17 +122,12 @@ class ObstacleLayer:
                 unit = d / dist[:, None]
                 far = origin + unit * np.minimum(dist, o.raytrace_max_range)[:, None]
                 near = origin + unit * o.raytrace_min_range
-                with np.errstate(invalid="ignore"):  # axis-parallel beams: inf * 0 inside, dropped
-                    rows, cols, _ = traversed_cells(geo, near, far, include_end=False)
                 # A beam clipped at raytrace_max_range clears its last cell too (it holds no return).
                 clipped = dist > o.raytrace_max_range
-                if clipped.any():
-                    er, ec = geo.world_to_cell(far[clipped])
-                    inside = geo.in_bounds(er, ec)
-                    rows = np.concatenate((rows, er[inside]))
-                    cols = np.concatenate((cols, ec[inside]))
-                self.costs[rows, cols] = FREE_SPACE
-                bounds = _union(bounds, _bounds_of(rows, cols))
+                for sel, include_end in ((~clipped, False), (clipped, True)):
+                    if sel.any():
+                        b = clear_segments(self.costs, geo, near[sel], far[sel], FREE_SPACE, include_end)
+                        bounds = _union(bounds, b)
         if o.marking and pts.shape[0]:
             d = pts - origin
             dist = np.hypot(d[:, 0], d[:, 1])
