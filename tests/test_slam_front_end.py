@@ -1,5 +1,6 @@
-"""Front-end behaviour that FR079 needed: every scan is matched (not only motion-filtered nodes), and
-the translation window absorbs odometry that lags the laser."""
+"""Front-end behaviour that FR079 needed: every scan is matched (not only motion-filtered nodes), the
+translation window absorbs odometry that lags the laser, and a poorly scoring match is searched
+again in a wide window."""
 
 from __future__ import annotations
 
@@ -44,8 +45,39 @@ def test_every_scan_matched_beats_odometry_between_nodes() -> None:
 
 def test_translation_window_covers_lagged_odometry() -> None:
     # odometry two scans late: the prediction is ~0.24 m off, beyond a 0.1 m window
-    fixed = {"linear_search_window_per_radian": 0.0, "search_levels": 0, "match_every_scan": True}
+    fixed = {
+        "linear_search_window_per_radian": 0.0,
+        "search_levels": 0,
+        "match_every_scan": True,
+        "wide_search_minimum_score": 0.0,  # no second, wider search: the fixed window alone
+    }
     narrow = _lagged_run(SlamOptions(linear_search_window=0.1, **fixed), lag=2)
     wide = _lagged_run(SlamOptions(linear_search_window=0.3, **fixed), lag=2)
     assert wide < 0.1, wide
     assert narrow > wide, (narrow, wide)
+
+
+def _slip_run(options: SlamOptions, slip: float = 0.35) -> float:
+    """Max position error (m) when odometry jumps ``slip`` m sideways at scan 25 (a wheel slip)."""
+    grid, res = box_world()
+    truth = loop_trajectory(LOOP_WAYPOINTS[:2], 0.12)[:40]
+    odom = truth.copy()
+    odom[25:, 1] += slip
+    rng = np.random.default_rng(5)
+    slam = GraphSlam(options)
+    for k in range(len(truth)):
+        scan = cast_scan(
+            grid, res, Pose2D.from_array(truth[k]), 180, range_max=6.0, noise=0.01, rng=rng, stamp=0.2 * k
+        )
+        slam.add_scan(scan, Pose2D.from_array(odom[k]).relative_to(Pose2D.from_array(odom[0])))
+    est = slam.trajectory()[:, 1:3]
+    return float(np.hypot(*(est - (truth[:, :2] - truth[0, :2])).T).max())
+
+
+def test_poor_match_is_searched_again_wider() -> None:
+    # a 0.35 m odometry jump is beyond the 0.1 m window: the match scores poorly, which triggers
+    # the second search in the wide (0.5 m, 30 deg) window, and that one finds the right pose
+    without = _slip_run(SlamOptions(wide_search_minimum_score=0.0))
+    with_wide = _slip_run(SlamOptions())
+    assert with_wide < 0.08, with_wide
+    assert without > 2 * with_wide, (without, with_wide)

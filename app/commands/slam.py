@@ -60,12 +60,13 @@ def run(args: argparse.Namespace) -> int:
     from nav.slam.system import SlamError, SlamOptions
     from nav.types import Pose2D
     from robot.logs import LogError
-    from robot.logs.reader import load_log
+    from robot.logs.reader import load_raw_log
 
     try:
-        records, laser = load_log(args.log, args.format, args.scan_topic, args.odom_topic, max(args.limit, 0))
+        raw = load_raw_log(args.log, args.format, args.scan_topic, args.odom_topic, max(args.limit, 0))
     except LogError as exc:
         raise CliError(str(exc)) from None
+    records, laser = raw.records(), raw.laser
     options = SlamOptions()
     if args.profile:
         from robot.profiles import ProfileError, load_profile
@@ -79,7 +80,9 @@ def run(args: argparse.Namespace) -> int:
         options = SlamOptions(max_laser_range=min(options.max_laser_range, lid.range_max))
     t0 = time.process_time()
     try:
-        slam = run_offline(records, laser, options, None if args.quiet else ProgressBar())
+        slam = run_offline(
+            records, laser, options, None if args.quiet else ProgressBar(), odometry=(raw.t_odom, raw.odom)
+        )
     except SlamError as exc:
         raise CliError(str(exc)) from None
     cpu = time.process_time() - t0
@@ -95,6 +98,7 @@ def run(args: argparse.Namespace) -> int:
     duration = float(records[-1].stamp) - float(records[0].stamp)
     print(
         f"{len(records)} scans, {slam.num_nodes} nodes, {slam.num_loop_closures} loop closures, "
+        f"odometry lag {slam.odometry_lag * 1e3:.0f} ms, "
         f"{cpu:.1f} s CPU ({duration / max(cpu, 1e-9):.1f}x real time) -> {args.out}",
         file=sys.stderr,
     )

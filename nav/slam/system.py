@@ -54,10 +54,9 @@ class SlamOptions:
     """Motion filter: ... or this much time (s) (Cartographer ``max_time_seconds`` 5)."""
     match_every_scan: bool = False
     """Scan-match every scan, not only motion-filtered nodes (Cartographer's local trajectory builder
-    matches all range data; the motion filter only gates insertion). Poses of in-between scans then
-    come from the laser, not from odometry interpolated at the scan stamp, which lags on FR079.
-    Off by default: it doubles the front end's cost and, with the 0.2 m window FR079 needs, costs ACES
-    accuracy (docs/slam.md has both sets of figures)."""
+    matches all range data; the motion filter only gates insertion). Off by default: it doubles the
+    front end's cost; with the lag estimation and the wide re-search the in-between scans placed by
+    odometry no longer carry FR079's timing error (docs/slam.md)."""
     submap_num_range_data: int = 40
     """Nodes per submap before a new one starts; each submap holds 2x this (Cartographer 90)."""
     voxel_filter_size: float = 0.05
@@ -67,19 +66,22 @@ class SlamOptions:
     likelihood_sigma: float = 0.05
     """Std-dev (m) of the likelihood field around occupied cells (Thrun et al. ``sigma_hit``)."""
     linear_search_window: float = 0.1
-    """Front-end correlative window half-width (m) when the robot does not turn (FR079 needs 0.2)."""
+    """Front-end correlative window half-width (m). A fixed 0.2 m window rescued FR079 before the
+    wide re-search existed but let ACES jump along corridors (0.044 m -> 0.10 m)."""
     linear_search_window_per_radian: float = 0.0
     """The translation window widens by this much (m) per radian of odometry rotation since the last
-    scan. FR079's odometry, interpolated at the scan stamps, lags the laser by about 0.13 s (heading
-    cross-correlation); in its fast turns a 0.1 m window could not reach the right translation and
-    the matcher made up for it with a wrong rotation (FR079 first 1600 scans, front end only: 0.62 m
-    with 0.1 m, 0.073 m with 0.2 m), while a fixed 0.15-0.2 m window lets ACES jump along corridors
-    (0.044 m -> 0.065-0.10 m). 0.1 m + 0.5 m/rad keeps ACES at 0.044 m but FR079 at 0.91 m, so
-    the default is a fixed 0.2 m window (0 here = off)."""
+    scan (0 = off; 0.5 m/rad kept ACES at 0.044 m but left FR079 at 0.91 m)."""
     angular_search_window: float = math.radians(10.0)
     """Front-end correlative window half-width (rad)."""
     angular_search_step: float = math.radians(0.5)
     """Front-end correlative angle step (rad)."""
+    wide_search_minimum_score: float = 0.6
+    """A front-end match scoring below this (mean likelihood 0..1) is searched again in the wide
+    window below and the better match kept (0 = off)."""
+    wide_linear_search_window: float = 0.5
+    """Translation half-width (m) of that second search (coarse-to-fine, 2 levels)."""
+    wide_angular_search_window: float = math.radians(30.0)
+    """Rotation half-width (rad) of that second search."""
     search_levels: int = 0
     """Front-end coarse-to-fine levels over max-pooled fields (0 = exhaustive search); 2 cost 25 %
     less at equal accuracy on FR079's first 1600 scans (not yet measured on the full logs)."""
@@ -104,6 +106,9 @@ class SlamOptions:
     """Only every n-th node is searched for loop closures (Cartographer ``sampling_ratio`` 0.3)."""
     loop_max_candidates: int = 2
     """Nearest finished submaps searched per node."""
+    loop_field_cache_size: int = 12
+    """Finished submaps whose likelihood field is kept for loop search (least recently searched
+    ones release it; it is rebuilt on demand). Bounds memory on long logs."""
     optimize_every_n_nodes: int = 100
     """Back end optimizes after this many new nodes even without a new loop (Cartographer 90)."""
     constraint_translation_sigma: float = 0.02
@@ -118,6 +123,15 @@ class SlamOptions:
     """Huber threshold (Mahalanobis units) of loop-closure edges."""
     max_iterations: int = 15
     """Pose-graph Gauss-Newton iterations."""
+
+    odometry_lag_estimation_nodes: int = 150
+    """Offline only (:func:`nav.slam.offline.run_offline` with the log's raw odometry): after this
+    many nodes the odometry-to-laser time offset is estimated from the data and, if significant,
+    the run restarts with odometry interpolated at ``t_scan - lag`` (0 = off)."""
+    odometry_lag_minimum: float = 0.02
+    """Smaller estimated lags (s) are not worth a restart."""
+    odometry_lag_max: float = 0.3
+    """Lags searched (s), both signs."""
 
     def grid_options(self) -> LogOddsOptions:
         return LogOddsOptions(resolution=self.resolution, grow_margin=2.0)
@@ -161,6 +175,9 @@ class GraphSlam:
         self._window = SearchWindow(
             o.linear_search_window, o.angular_search_window, o.angular_search_step, o.search_levels
         )
+        self._wide_window = SearchWindow(
+            o.wide_linear_search_window, o.wide_angular_search_window, o.angular_search_step, 2
+        )
         self._loop_window = SearchWindow(
             o.loop_search_space_dimension,
             o.loop_search_angular_window,
@@ -176,6 +193,7 @@ class GraphSlam:
         self._submaps: list[Submap] = []
         self._submap_global: list[np.ndarray] = []
         self._loops: list[LoopCandidate] = []
+        self._field_lru: dict[int, None] = {}  # finished submaps holding a field, oldest first
         # per scan (every add_scan call): stamp, reference node, pose relative to that node
         self._scan_stamp: list[float] = []
         self._scan_node: list[int] = []
@@ -190,6 +208,8 @@ class GraphSlam:
         self._map: OccupancyGrid | None = None
         self._map_nodes = -1
         self.last_score = float("nan")
+        self.odometry_lag = 0.0
+        """Odometry-to-laser lag (s) the offline driver corrected (informational)."""
 
     # -- front end ----------------------------------------------------------------------------------
     def add_scan(self, scan: LaserScan, odom_pose: Pose2D, laser_pose: Pose2D = _IDENTITY) -> Pose2D:
@@ -276,6 +296,13 @@ class GraphSlam:
             window = replace(window, linear_search_window=wide)
         try:
             in_submap, self.last_score = match_scan(target.field(), match_pts, prior, window, self._refine)
+            if self.last_score < o.wide_search_minimum_score:
+                # poor fit: the prediction may be outside the window (slip, fast turn); search again
+                # wider and keep whichever fits better
+                field = target.field()
+                wide_pose, wide_score = match_scan(field, match_pts, prior, self._wide_window, self._refine)
+                if wide_score > self.last_score:
+                    in_submap, self.last_score = wide_pose, wide_score
         except ScanMatchError:
             return pred, match_pts
         return target.local_pose.compose(in_submap), match_pts
@@ -319,6 +346,14 @@ class GraphSlam:
             if n < 2:
                 return False
             new_loops = self._search_loops(nodes, glob, submaps, finished, sm_nodes, sm_glob, start, n)
+            if not new_loops and start > 0:
+                # No new constraint: the new nodes already satisfy their front-end edges at the
+                # current correction, so re-optimizing would barely move anything. Skip it.
+                with self._lock:
+                    self._searched_upto = n
+                    self._global[start:n] = list(glob[start:n])
+                    self._optimized_upto = max(self._optimized_upto, n)
+                return False
             edges = self._edges(nodes, submaps, sm_nodes, n, m, self._loops + new_loops)
             x0 = np.vstack((glob, sm_glob))
             x, _w = optimize_pose_graph(
@@ -380,7 +415,20 @@ class GraphSlam:
                 )
                 if cand is not None:
                     found.append(cand)
+                self._keep_field(submaps, j)
         return found
+
+    def _keep_field(self, submaps: list[Submap], j: int) -> None:
+        """Finished submaps keep their (pooled) likelihood field for the next loop searches, which
+        mostly hit the same few nearby submaps; beyond ``loop_field_cache_size`` the least recently
+        searched one drops it (a field with its pooled levels is 4x the submap's grid in memory,
+        which on Intel would pass 1 GB). Back-end thread only."""
+        self._field_lru.pop(j, None)
+        self._field_lru[j] = None
+        while len(self._field_lru) > self.options.loop_field_cache_size:
+            old = next(iter(self._field_lru))
+            del self._field_lru[old]
+            submaps[old].release_field()
 
     def _edges(
         self,
@@ -448,6 +496,13 @@ class GraphSlam:
             base = np.array([self._map_pose(k).as_array() for k in range(-1, len(self._nodes))])
             poses = _compose_arr(base[ref + 1], np.array(self._scan_delta))
             return np.column_stack((np.array(self._scan_stamp), poses))
+
+    def front_end_nodes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Stamps (n,) and front-end (local frame) poses (n, 3) of the graph's nodes."""
+        with self._lock:
+            stamps = np.array([nd.stamp for nd in self._nodes], dtype=float)
+            poses = np.array([nd.local.as_array() for nd in self._nodes], dtype=float).reshape(-1, 3)
+        return stamps, poses
 
     def node_poses(self) -> np.ndarray:
         """(n, 3) map poses of the graph's scan nodes."""

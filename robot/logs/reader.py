@@ -17,7 +17,8 @@ from typing import Literal, NamedTuple
 
 import numpy as np
 
-from nav.types import LaserScan, Pose2D, wrap_angle
+from nav.slam.time_offset import interpolate_poses
+from nav.types import LaserScan, Pose2D
 from robot.logs.stamp import Stamp
 
 LogFormat = Literal["auto", "rosbag", "carmen"]
@@ -46,32 +47,36 @@ def detect_format(path: Path) -> Literal["rosbag", "carmen"]:
     return "carmen"
 
 
-def interpolate_poses(t_query: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Linearly interpolate (N, 3) poses (angles unwrapped first) at ``t_query``; held at the ends."""
-    order = np.argsort(t, kind="stable")
-    t, poses = t[order], poses[order]
-    th = np.unwrap(poses[:, 2])
-    out = np.column_stack(
-        (np.interp(t_query, t, poses[:, 0]), np.interp(t_query, t, poses[:, 1]), np.interp(t_query, t, th))
-    )
-    out[:, 2] = wrap_angle(out[:, 2])
-    return out
-
-
 def _records(stamps: list[Stamp], scans: list[LaserScan], odom: np.ndarray) -> Iterator[LogRecord]:
     for s, scan, o in zip(stamps, scans, odom, strict=True):
         yield LogRecord(s, scan, Pose2D(float(o[0]), float(o[1]), float(o[2])))
 
 
-def load_log(
+class RawLog(NamedTuple):
+    """A log as read: scans with their stamps, the raw odometry samples and the laser pose."""
+
+    stamps: list[Stamp]
+    scans: list[LaserScan]
+    t_odom: np.ndarray  # (M,) seconds
+    odom: np.ndarray  # (M, 3) odom -> base_link poses
+    laser: Pose2D
+
+    def records(self, lag: float = 0.0) -> list[LogRecord]:
+        """Records in stamp order, odometry interpolated at ``t_scan - lag``."""
+        t_scan = np.array([float(s) for s in self.stamps])
+        order = np.argsort(t_scan, kind="stable")
+        pose = interpolate_poses(t_scan[order] - lag, self.t_odom, self.odom)
+        return list(_records([self.stamps[i] for i in order], [self.scans[i] for i in order], pose))
+
+
+def load_raw_log(
     path: str | Path,
     fmt: LogFormat = "auto",
     scan_topic: str = "/scan",
     odom_topic: str = "/odom",
     max_scans: int = 0,
-) -> tuple[list[LogRecord], Pose2D]:
-    """Read a log: its records (in stamp order) and the laser pose in base_link. ``max_scans > 0``
-    keeps only the first scans (bags stop reading early)."""
+) -> RawLog:
+    """Read a log without pairing scans and odometry yet (see :func:`load_log`)."""
     p = Path(path)
     if not p.exists():
         raise LogError(f"no such log: {p}")
@@ -92,11 +97,20 @@ def load_log(
         raise LogError(f"{p.name}: no usable laser scans (scan topic {scan_topic!r})")
     if len(t_odom) == 0:
         raise LogError(f"{p.name}: no odometry (odom topic {odom_topic!r} nor tf odom->base_link)")
-    t_scan = np.array([float(s) for s in stamps])
-    order = np.argsort(t_scan, kind="stable")
-    pose = interpolate_poses(t_scan[order], np.asarray(t_odom, float), np.asarray(odom, float))
-    recs = list(_records([stamps[i] for i in order], [scans[i] for i in order], pose))
-    return recs, laser
+    return RawLog(stamps, scans, np.asarray(t_odom, float), np.asarray(odom, float).reshape(-1, 3), laser)
+
+
+def load_log(
+    path: str | Path,
+    fmt: LogFormat = "auto",
+    scan_topic: str = "/scan",
+    odom_topic: str = "/odom",
+    max_scans: int = 0,
+) -> tuple[list[LogRecord], Pose2D]:
+    """Read a log: its records (in stamp order) and the laser pose in base_link. ``max_scans > 0``
+    keeps only the first scans (bags stop reading early)."""
+    raw = load_raw_log(path, fmt, scan_topic, odom_topic, max_scans)
+    return raw.records(), raw.laser
 
 
 def read_log(
