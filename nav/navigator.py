@@ -145,6 +145,8 @@ class Navigator:
                 raise ValueError("Navigator needs a planner, a plan_fn or a request_plan callback")
             plan_fn = planner.plan
         self.controller = controller
+        self.controllers: dict[str, Controller] = {"custom": controller}
+        self.controller_name = "custom"
         self.goal_checker = goal_checker
         self.progress_checker = progress_checker
         self.options = options or NavigatorOptions()
@@ -169,6 +171,8 @@ class Navigator:
         self._last_now: float | None = None
         self._debug: Any = None
         self._activity = "idle"
+        self._held: tuple[float, Twist2D, Any] | None = None  # (time, cmd, debug) of the last compute
+        self._tick_dt = 0.0  # seconds between the last two ticks
 
     @classmethod
     def for_robot(
@@ -181,24 +185,48 @@ class Navigator:
         request_plan: Callable[[PlanRequest], None] | None = None,
         goal_checker: GoalChecker | None = None,
         progress_checker: ProgressChecker | None = None,
+        controller: str | None = None,
+        teb_overrides: dict[str, Any] | None = None,
         **dwa_overrides: Any,
     ) -> Navigator:
-        """A navigator with a DWA controller configured from a robot profile (duck-typed like
-        ``DwaOptions.for_robot``; ``dwa_overrides`` are DwaOptions fields) and Nav2's default goal
-        and progress checkers."""
-        from nav.control.dwa import DwaController
-        from nav.control.options import DwaOptions
-
-        controller = DwaController(DwaOptions.for_robot(profile, **dwa_overrides))
-        return cls(
+        """A navigator configured from a robot profile (duck-typed like ``DwaOptions.for_robot``)
+        with Nav2's default goal and progress checkers and both local controllers built (DWA from
+        ``dwa_overrides``, TEB from ``teb_overrides``, over the profile-derived options), so a goal
+        can switch between them. The active one is ``controller``, else the profile's
+        ``controller`` field; an unknown name raises ``ValueError`` naming the field."""
+        field_name = "controller" if controller is not None else "profile field controller"
+        name = controller if controller is not None else str(getattr(profile, "controller", "dwa"))
+        check_controller_name(name, field_name)
+        controllers = {
+            "dwa": make_controller("dwa", profile, **dwa_overrides),
+            "teb": make_controller("teb", profile, **(teb_overrides or {})),
+        }
+        nav = cls(
             planner,
-            controller,
+            controllers[name],
             goal_checker or GoalChecker(),
             progress_checker or ProgressChecker(),
             options,
             plan_fn=plan_fn,
             request_plan=request_plan,
         )
+        nav.controllers = controllers
+        nav.controller_name = name
+        return nav
+
+    def select_controller(self, name: str) -> None:
+        """Make ``controllers[name]`` the active controller and reset it (a goal that asks for DWA or
+        TEB); a path being followed is handed to it. Unknown names raise ``ValueError``."""
+        check_controller_name(name, "controller", tuple(self.controllers))
+        new = self.controllers[name]
+        if new is not self.controller:
+            self.controller.reset()
+            self.controller = new
+            self.controller_name = name
+        new.reset()
+        self._held = None
+        if self._path is not None:
+            new.set_path(self._path)
 
     # -- requests ---------------------------------------------------------------------------------
     def set_goals(self, goals: Sequence[Pose2D]) -> None:
@@ -258,6 +286,8 @@ class Navigator:
         """Advance one control cycle and return the command to send."""
         local = local_costmap if local_costmap is not None else global_costmap
         self._now, self._pose, self._global = now, pose, global_costmap
+        if self._last_now is not None and now > self._last_now:
+            self._tick_dt = now - self._last_now
         self._update_speed(now, velocity)
         self._debug = None
         if self._cancel_requested:
@@ -294,20 +324,28 @@ class Navigator:
             allowance = self.progress_checker.options.movement_time_allowance
             return self._stuck("NoProgress", f"moved less than the required radius in {allowance:g} s", None)
 
-        try:
-            cmd, self._debug = self.controller.compute(pose, velocity, local)
-        except PatienceExceeded as exc:
-            return self._stuck(type(exc).__name__, str(exc), exc)
-        except NoValidControl:
-            # stop for this cycle and look for another way (Nav2 retries with a fresh path too)
-            self._debug = getattr(self.controller, "last_debug", None)
-            self._activity = "no safe trajectory: stopping"
-            if now - self._last_attempt_time >= self.options.blocked_replan_period:
-                self._force_plan = "controller failed"
-            self.state = NavState.FOLLOWING
-            return self._tick(ZERO_TWIST)
-        except ControllerError as exc:
-            return self._fail(type(exc).__name__, str(exc), exc)
+        held = self._held
+        if held is not None and now < held[0] + _control_period(self.controller) - 0.5 * self._tick_dt:
+            # the controller runs at its own controller_frequency (TEB 10 Hz in a 20 Hz loop): keep
+            # its last command until it is due, as Nav2's controller_server would
+            cmd, self._debug = held[1], held[2]
+        else:
+            self._held = None
+            try:
+                cmd, self._debug = self.controller.compute(pose, velocity, local)
+            except PatienceExceeded as exc:
+                return self._stuck(type(exc).__name__, str(exc), exc)
+            except NoValidControl:
+                # stop for this cycle and look for another way (Nav2 retries with a fresh path too)
+                self._debug = getattr(self.controller, "last_debug", None)
+                self._activity = "no safe trajectory: stopping"
+                if now - self._last_attempt_time >= self.options.blocked_replan_period:
+                    self._force_plan = "controller failed"
+                self.state = NavState.FOLLOWING
+                return self._tick(ZERO_TWIST)
+            except ControllerError as exc:
+                return self._fail(type(exc).__name__, str(exc), exc)
+            self._held = (now, cmd, self._debug)
         self.state = NavState.FOLLOWING
         in_window = bool(getattr(self._debug, "in_goal_window", False))
         self._activity = (
@@ -411,11 +449,13 @@ class Navigator:
         self.goal_checker.reset()
         self.progress_checker.reset()
         self.controller.reset()
+        self._held = None
         self.state = NavState.PLANNING
         self._activity = "planning"
 
     def _clear_stuck(self) -> None:
         self._stuck_reason, self._stuck_error = "", None
+        self._held = None
         if self.state == NavState.STUCK:
             self.state = NavState.FOLLOWING
 
@@ -439,6 +479,7 @@ class Navigator:
         if state != NavState.FAILED:
             self._activity = state.value
         self.controller.reset()
+        self._held = None
         return self._tick(ZERO_TWIST, outcome)
 
     def _update_speed(self, now: float, velocity: Twist2D) -> None:
@@ -484,7 +525,42 @@ class Navigator:
         return NavTick(cmd, self.state, fb, outcome)
 
 
+CONTROLLERS = ("dwa", "teb")
+"""Local controllers a profile or a goal can name (Nav2 ``controller_plugins``)."""
+
+
+def check_controller_name(
+    name: object, field_name: str = "controller", known: Sequence[str] = CONTROLLERS
+) -> str:
+    """``name`` if it is a known controller, else ``ValueError`` naming ``field_name``."""
+    if not isinstance(name, str) or name not in known:
+        raise ValueError(f"{field_name} must be one of {', '.join(known)}, got {name!r}")
+    return name
+
+
+def make_controller(name: str, profile: Any, **overrides: Any) -> Controller:
+    """A ``DwaController`` or ``TebController`` with options derived from ``profile`` then
+    ``overrides`` (fields of ``DwaOptions`` / ``TebOptions``)."""
+    check_controller_name(name)
+    if name == "teb":
+        from nav.control.teb import TebController
+        from nav.control.teb_options import TebOptions
+
+        return TebController(TebOptions.for_robot(profile, **overrides))
+    from nav.control.dwa import DwaController
+    from nav.control.options import DwaOptions
+
+    return DwaController(DwaOptions.for_robot(profile, **overrides))
+
+
+def _control_period(controller: Controller) -> float:
+    """Seconds between compute calls: 1 / the controller's ``controller_frequency`` (0: every tick)."""
+    hz = getattr(getattr(controller, "options", None), "controller_frequency", None)
+    return 1.0 / hz if isinstance(hz, int | float) and hz > 0 else 0.0
+
+
 __all__ = [
+    "CONTROLLERS",
     "GlobalPlanner",
     "NavFeedback",
     "NavOutcome",
@@ -494,4 +570,6 @@ __all__ = [
     "NavigatorOptions",
     "PlanFn",
     "PlanRequest",
+    "check_controller_name",
+    "make_controller",
 ]

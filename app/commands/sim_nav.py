@@ -3,7 +3,9 @@
 The same ``Session`` and the same localization and navigation features as the server (no HTTP), on
 a ``VirtualClock`` that the loop advances one control period at a time: deterministic for a seed and
 limited only by the CPU. Prints ``{"reached", "time_s", "path_length_m", "recoveries", "collisions",
-"min_clearance_m", "localization_error_m"}`` (``--json``) or a one-line summary.
+"min_clearance_m", "localization_error_m", "controller", ...}`` (``--json``) or a one-line summary.
+``--controller teb`` drives with TEB instead of DWA; ``--people N`` adds N random walkers
+(0.5-1.2 m/s, ``Crowd.populate``) that the robot must get round.
 
 ``run_sim_nav`` is the library entry point used by the scenario suite (``bench/scenarios``).
 """
@@ -50,7 +52,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--goal", required=True, type=_pose_arg, action="append", help="goal x,y,theta (repeat: waypoints)"
     )
-    p.add_argument("--controller", choices=["dwa"], default="dwa")
+    p.add_argument(
+        "--controller", choices=["dwa", "teb"], default=None, help="local controller (default: the profile's)"
+    )
+    p.add_argument("--people", type=int, default=0, help="random walkers (0.5-1.2 m/s) in the world")
     p.add_argument("--planner", choices=["astar", "dijkstra"], default="astar")
     p.add_argument("--localization", choices=["amcl", "truth"], default="amcl")
     p.add_argument("--seed", type=int, default=0)
@@ -75,6 +80,10 @@ class SimNavConfig:
     rate_hz: float = 20.0
     obstacles: tuple[tuple[tuple[float, float], ...], ...] = ()
     """Polygons added to the simulated world only (unmapped obstacles the lidar must see)."""
+    controller: str | None = None
+    """Local controller, "dwa" | "teb"; None: the profile's."""
+    people: int = 0
+    """Random walkers added to the simulated world (away from the start)."""
 
 
 @dataclass
@@ -90,8 +99,11 @@ class SimNavResult:
     reason: str = ""
     goals_reached: int = 0
     localization_error_max_m: float = 0.0
+    min_person_clearance_m: float | None = None
+    """Smallest footprint-outline to person-disc distance (m); None without people."""
     wall_s: float = 0.0
     speedup: float = 0.0
+    controller: str = ""
     extra: dict[str, Any] = field(default_factory=dict)
 
     def as_dict(self) -> dict[str, Any]:
@@ -124,6 +136,7 @@ def build_sim_stack(
     localization: str = "amcl",
     seed: int = 0,
     rate_hz: float = 20.0,
+    controller: str | None = None,
 ) -> SimStack:
     """Session + SimDriver + localization and navigation features, as ``Runtime.start`` wires them."""
     from app.features.localization import Localization, LocalizationOptions
@@ -141,7 +154,7 @@ def build_sim_stack(
     )
     loc = Localization(session, LocalizationOptions(source=localization), seed=seed)  # type: ignore[arg-type]
     session.add_stage(loc)
-    nav = Navigation(session, loc, NavigationOptions(planner=planner))  # type: ignore[arg-type]
+    nav = Navigation(session, loc, NavigationOptions(planner=planner, controller=controller))  # type: ignore[arg-type]
     session.add_stage(nav)
     return SimStack(session, driver, world, loc, nav)
 
@@ -174,6 +187,8 @@ def drive(stack: SimStack, goals: Sequence[Pose2D], timeout: float) -> SimNavRes
     length = 0.0
     outcome = None
     collisions0 = s.collisions
+    crowd = world.people
+    min_person = math.inf
     while s.clock.now() - t0 < timeout:
         s.clock.sleep_until(s.clock.now() + s.period)
         s.step()
@@ -185,6 +200,10 @@ def drive(stack: SimStack, goals: Sequence[Pose2D], timeout: float) -> SimNavRes
         cols = np.clip(cols, 0, geo.width - 1)
         # cell-centre distance minus half a cell: distance to the obstacle cell's edge
         min_clear = min(min_clear, float(clear[rows, cols].min()) - 0.5 * geo.resolution)
+        if len(crowd):  # people are not in the clearance map: outline points to each disc
+            pts = truth.transform_points(outline)
+            gap = np.hypot(pts[:, None, 0] - crowd.xy[None, :, 0], pts[:, None, 1] - crowd.xy[None, :, 1])
+            min_person = min(min_person, float((gap - crowd.radius[None, :]).min()))
         errs.append(s.pose.distance_to(truth))
         if nav.last_outcome is not None and not nav.active:
             outcome = nav.last_outcome
@@ -204,8 +223,10 @@ def drive(stack: SimStack, goals: Sequence[Pose2D], timeout: float) -> SimNavRes
         reason="" if outcome is None else outcome["reason"],
         goals_reached=0 if outcome is None else outcome["goals_reached"],
         localization_error_max_m=float(e.max()),
+        min_person_clearance_m=max(0.0, min_person) if math.isfinite(min_person) else None,
         wall_s=wall,
         speedup=sim_t / wall if wall > 0 else math.inf,
+        controller=nav.navigator.controller_name,
     )
 
 
@@ -221,6 +242,11 @@ def run_sim_nav(cfg: SimNavConfig) -> SimNavResult:
     for poly in cfg.obstacles:
         world.add_polygon(list(poly))
     start = Pose2D(*cfg.start)
+    if cfg.people:
+        import numpy as np
+
+        # walkers start >= 1.5 m from the robot; the seed places them and picks their targets
+        world.people.populate(cfg.people, np.random.default_rng(cfg.seed + 7919), avoid=(start.x, start.y))
     stack = build_sim_stack(
         grid,
         world,
@@ -230,6 +256,7 @@ def run_sim_nav(cfg: SimNavConfig) -> SimNavResult:
         localization=cfg.localization,
         seed=cfg.seed,
         rate_hz=cfg.rate_hz,
+        controller=cfg.controller,
     )
     try:
         stack.localization.set_initial_pose(start)
@@ -243,6 +270,7 @@ def run(args: argparse.Namespace) -> int:
     from app.features.navigation import GoalRejected, NavigationRefused
     from maps.mapio import MapFormatError
     from robot.profiles import ProfileError
+    from robot.sim.people import PeopleError
 
     map_path = Path(args.map)
     if not map_path.is_file():
@@ -252,6 +280,8 @@ def run(args: argparse.Namespace) -> int:
         raise CliError(f"world file not found: {world_path}")
     if not math.isfinite(args.timeout) or args.timeout <= 0:
         raise CliError("--timeout must be a positive number of seconds")
+    if not 0 <= args.people <= 100:
+        raise CliError("--people must be between 0 and 100")
     cfg = SimNavConfig(
         map_path=map_path,
         world_path=world_path,
@@ -262,12 +292,14 @@ def run(args: argparse.Namespace) -> int:
         localization=args.localization,
         seed=args.seed,
         timeout=args.timeout,
+        controller=args.controller,
+        people=args.people,
     )
     try:
         result = run_sim_nav(cfg)
     except (LocalizationRequestError, GoalRejected, NavigationRefused) as exc:
         raise CliError(str(exc)) from None
-    except (MapFormatError, ProfileError, OSError, ValueError) as exc:
+    except (MapFormatError, ProfileError, PeopleError, OSError, ValueError) as exc:
         raise CliError(f"cannot run: {exc}") from None
     d = result.as_dict()
     if args.json:
@@ -275,7 +307,8 @@ def run(args: argparse.Namespace) -> int:
     else:
         status = "reached" if result.reached else f"not reached ({result.outcome} {result.reason})".strip()
         print(
-            f"{status} in {result.time_s:.1f} s simulated ({result.speedup:.0f}x real time), "
+            f"{status} with {result.controller} in {result.time_s:.1f} s simulated "
+            f"({result.speedup:.0f}x real time), "
             f"{result.path_length_m:.2f} m driven, {result.collisions} collisions, "
             f"min clearance {result.min_clearance_m:.3f} m, "
             f"localization RMS {result.localization_error_m:.3f} m"

@@ -123,6 +123,8 @@ class BehaviorRecovery:
     def _event(self, ev: Any) -> None:
         if self._feature is not None:
             self._feature.session.add_event("recovery", **ev.as_dict())
+            if ev.kind == "attempt":  # the 3D view marks where each attempt started
+                self._feature.mark_recovery(ev.behavior)
 
     def _ctx(self, feature: Navigation, now: float) -> Any:
         from nav.behaviors import BehaviorContext
@@ -189,8 +191,13 @@ class NavigationOptions:
     """Which costmap the 3D view shows as ``extras["costmap"]``."""
     wait_for_plans: bool | None = None
     """Block the tick until a requested plan is back; None: only with a virtual clock."""
+    controller: Literal["dwa", "teb"] | None = None
+    """Default local controller (Nav2 ``controller_plugins``); None: the profile's ``controller``.
+    A goal request may pick the other one for itself."""
     dwa_overrides: dict[str, Any] = field(default_factory=dict)
     """DwaOptions fields over the profile-derived ones."""
+    teb_overrides: dict[str, Any] = field(default_factory=dict)
+    """TebOptions fields over the profile-derived ones."""
     recovery: bool = True
     """Install ``BehaviorRecovery`` (Nav2's recovery subtree) as the recovery hook."""
 
@@ -220,8 +227,11 @@ class Navigation:
             request_plan=self._request_plan,
             goal_checker=GoalChecker(),
             progress_checker=ProgressChecker(),
+            controller=o.controller,
+            teb_overrides=o.teb_overrides,
             **o.dwa_overrides,
         )
+        self.default_controller = self.navigator.controller_name
         virtual = bool(getattr(session.clock, "is_virtual", False))
         self._wait = virtual if o.wait_for_plans is None else o.wait_for_plans
         self._lock = threading.Lock()
@@ -243,6 +253,9 @@ class Navigation:
         self.costmap_view: str = o.costmap_view  # "global" | "local": which one the 3D view shows
         self._active = False
         self._waypoints: tuple[tuple[Pose2D, ...], np.ndarray] | None = None
+        # (x, y, theta, behaviour) where each recovery attempt of the current request started; a new
+        # tuple on each change so the viewer can tell by identity
+        self._recovery_marks: tuple[tuple[float, float, float, str], ...] = ()
         self._build_costmaps(localization.grid)
         localization.add_map_listener(self._on_map)
         session.set_command_source(Mode.NAVIGATING, self._command)
@@ -330,12 +343,17 @@ class Navigation:
         if reason is not None:
             raise GoalRejected(reason, goal, nearest_free_pose(cm, goal, r), index)
 
-    def set_goals(self, goals: Sequence[Pose2D]) -> None:
+    def set_goals(self, goals: Sequence[Pose2D], controller: str | None = None) -> None:
         """Validate ``goals`` (raises GoalRejected / NavigationRefused) and start navigating through
-        them in order; replaces the current request."""
+        them in order; replaces the current request. ``controller`` ("dwa" | "teb") drives this
+        request only; None: the default one (``NavigationOptions.controller`` or the profile's)."""
+        from nav.navigator import check_controller_name
+
         goals = list(goals)
         if not goals:
             raise GoalRejected("missing", Pose2D(), None)
+        if controller is not None:
+            check_controller_name(controller)
         mode = self.session.modes.mode
         if mode in (Mode.ESTOP, Mode.FAULT) or self.session.estop_latched:
             raise NavigationRefused(f"cannot navigate in mode {mode.value} (reset first)", mode.value)
@@ -348,10 +366,14 @@ class Navigation:
             self.session.modes.request(Mode.NAVIGATING, "navigation goal")
         except TransitionRefused as exc:
             raise NavigationRefused(exc.reason, exc.current.value, exc.allowed) from None
+        chosen = controller or self.default_controller
         with self._lock:
-            self._pending.append(("goals", goals))
+            self._pending.append(("goals", (goals, chosen)))
         self.session.add_event(
-            "navigation", status="goal accepted", goals=[[g.x, g.y, g.theta] for g in goals]
+            "navigation",
+            status="goal accepted",
+            goals=[[g.x, g.y, g.theta] for g in goals],
+            controller=chosen,
         )
         for g in goals:  # one typed event per goal: what run metrics and the run timeline count
             self.session.add_event("goal", pose=[g.x, g.y, g.theta])
@@ -359,10 +381,13 @@ class Navigation:
     def add_goal(self, goal: Pose2D) -> None:
         """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle."""
         with self._lock:
-            queued = [g for kind, arg in self._pending if kind == "goals" for g in arg]
+            requests = [arg for kind, arg in self._pending if kind == "goals"]
+        queued = [g for goals, _ in requests for g in goals]
         done = self._last_tick.feedback.goal_index if self._last_tick is not None else 0
         current = self.navigator.goals[done:] if self._active else []
-        self.set_goals([*current, *queued, goal] if (current or queued) else [goal])
+        # the queue keeps the controller of the request it extends
+        controller = requests[-1][1] if requests else self.navigator.controller_name if current else None
+        self.set_goals([*current, *queued, goal] if (current or queued) else [goal], controller)
 
     def cancel(self) -> bool:
         """Cancel navigation (outcome ``cancelled`` next tick). False if nothing was running."""
@@ -387,10 +412,13 @@ class Navigation:
                 self._abort("active map changed", now)
                 self._build_costmaps(arg)
             elif kind == "goals":
-                self.navigator.set_goals(arg)
+                goals, controller = arg
+                self.navigator.select_controller(controller)  # resets it: a fresh band / window
+                self.navigator.set_goals(goals)
                 if self.recovery is not None and hasattr(self.recovery, "reset"):
                     self.recovery.reset()
                 self.last_outcome = None  # the outcome of *this* request, once it ends
+                self._recovery_marks = ()  # markers are kept for the current navigation only
                 self._futures.clear()
                 self._active = True
             elif kind == "cancel" and self._active:
@@ -559,6 +587,7 @@ class Navigation:
             "state": self.navigator.state.value if self._active or tick is None else tick.state.value,
             "active": self._active,
             "planner": self.options.planner,
+            "controller": self.navigator.controller_name,
             "goal": None if goal is None else _pose(goal),
             "goal_index": fb.goal_index if fb is not None else 0,
             "goals": [_pose(g) for g in goals],
@@ -573,6 +602,27 @@ class Navigation:
     def path(self) -> Path | None:
         return self.navigator.path if self._active else None
 
+    def mark_recovery(self, behavior: str) -> None:
+        """Remember where a recovery attempt started (loop thread), for the 3D view."""
+        p = self.session.pose
+        self._recovery_marks = (*self._recovery_marks, (p.x, p.y, p.theta, behavior))
+
+    def current_behavior(self) -> str | None:
+        """The behaviour running now, named as in the viewer palette: the active recovery's own name
+        while RECOVERING, else compute_path / follow_path / blocked; None when not navigating."""
+        if not self._active:
+            return None
+        policy = getattr(self.recovery, "policy", None)
+        if self.session.modes.mode == Mode.RECOVERING:
+            active = getattr(policy, "active", None)
+            return getattr(active, "name", None) or "recovery"
+        tick = self._last_tick
+        if tick is None or tick.state.value == "planning":
+            return "compute_path"
+        if tick.feedback.activity.startswith("no safe trajectory"):
+            return "blocked"
+        return "follow_path" if tick.state.value == "following" else tick.state.value
+
     def snapshot_fields(self, session: Session) -> dict[str, Any] | None:
         tick = self._last_tick
         local = self.costmap_view == "local"
@@ -581,6 +631,8 @@ class Navigation:
             "costmap_version": ("local", id(self._local_cm)) if local else self._costmap_version,
             "navigation": self.state(),
         }
+        if self._recovery_marks:
+            extras["recovery_markers"] = self._recovery_marks
         if not self._active or tick is None:
             return {"extras": extras}
         fb = tick.feedback
@@ -592,10 +644,14 @@ class Navigation:
             extras["waypoints"] = self._waypoints[1]
         if fb.trajectories is not None and fb.chosen >= 0:
             extras["local_plan_best"] = fb.chosen
+        band = getattr(getattr(self.navigator.controller, "last_debug", None), "band", None)
+        if band is not None:  # TEB: the optimized band's poses, for the 3D view
+            extras["teb_band"] = band
         return {
             "path": fb.path,
             "goal": fb.goal,
             "local_plan": fb.trajectories,
+            "behavior": self.current_behavior(),
             "extras": extras,
         }
 

@@ -1,21 +1,28 @@
-"""Navigation scenario suite: the whole stack (simulator, AMCL, costmaps, A*, DWA, navigator) driven
-through goal sets on a virtual clock, reported as success rates against the issue's targets and
-source A's trial results. Benchmarks are registered in ``bench/navigation.py`` (``navdeck bench
-scenarios``); this package holds the trial sets and runners only."""
+"""Navigation scenario suite: the whole stack (simulator, AMCL, costmaps, A*, DWA or TEB, navigator,
+safety filter) driven through goal sets on a virtual clock, reported as success rates against the
+issue's targets and source A's trial results. The random-goal and quick benchmarks are registered in
+``bench/navigation.py``; issue 5's per-controller sets in ``bench/scenarios/issue5.py`` (both run by
+``navdeck bench scenarios``). ``suite`` holds the trial sets and runners."""
 
+from bench.scenarios.issue5 import BENCHMARKS
 from bench.scenarios.suite import (
     SetResult,
     TrialResult,
     fixed_obstacle_trials,
+    greenhouse_row_trials,
+    person_trials,
     random_goal_trials,
     straight_trials,
     turn_trials,
 )
 
 __all__ = [
+    "BENCHMARKS",
     "SetResult",
     "TrialResult",
     "fixed_obstacle_trials",
+    "greenhouse_row_trials",
+    "person_trials",
     "random_goal_trials",
     "straight_trials",
     "turn_trials",

@@ -5,13 +5,20 @@
   goal is drawn uniformly over free space at least ``clearance`` from any wall, 1.5..8 m away, and
   kept only if A* finds a path to it from where the robot stands. After a failed goal the robot is
   carried to a random free spot and its pose set (an operator's rescue), so failures do not cascade.
-* Source A's sets (Vietnamese ROS2 thesis, 20 trials each): ``straight_trials`` (no obstacle, goal
-  straight ahead), ``turn_trials`` (no obstacle, the goal round a corner of an L-shaped corridor),
-  ``fixed_obstacle_trials`` (a 30 x 30 cm box on the straight line that is in the world but not on
-  the map, so only the lidar sees it). Each trial is a fresh simulated robot; seeds vary the start,
-  the goal, sensor noise and wheel slip.
+* Source A's four sets (Vietnamese ROS2 thesis, 20 trials each there; issue 5 asks >= 50):
+  ``straight_trials`` (no obstacle, goal straight ahead), ``turn_trials`` (no obstacle, the goal
+  round a corner of an L-shaped corridor), ``fixed_obstacle_trials`` (a 30 x 30 cm box on the
+  straight line that is in the world but not on the map, so only the lidar sees it) and
+  ``person_trials`` (a person standing beside the line steps in ~0.3 m ahead of the robot's front
+  when it comes near, ``Crowd.add_step_in``, stands there a few seconds and steps back). Each trial
+  is a fresh simulated robot; seeds vary the start, the goal, the person, sensor noise and slip.
+* ``greenhouse_row_trials`` (source C): the omni robot drives the length of a greenhouse aisle
+  whose soil mounds and puddles (``maps/stock/greenhouse.scenario.toml``) are in the world but not
+  in the map; the local planner must bend round them without touching one.
 
 Every trial localizes with AMCL from the operator's initial pose (the true start), as a user would.
+``controller`` ("dwa" | "teb", None: the profile's) picks the local controller; ``safety`` installs
+the server's safety filter (``robot.safety.SafetyFilter``) below it, as ``navdeck serve`` does.
 """
 
 from __future__ import annotations
@@ -84,6 +91,7 @@ OnTrial = Callable[[TrialResult], None]
 def _run(
     stack: SimStack, name: str, start: Pose2D, goal: Pose2D, timeout: float, on_trial: OnTrial | None
 ) -> TrialResult:
+    """One goal on ``stack``; the stack's session is closed by the caller."""
     trial = TrialResult(name, start, goal, drive(stack, [goal], timeout))
     if on_trial is not None:
         on_trial(trial)
@@ -114,13 +122,32 @@ def _l_corridor() -> OccupancyGrid:
     return _grid_from_mask(occ, res)
 
 
-def _fresh(grid: OccupancyGrid, start: Pose2D, seed: int, obstacles=()) -> SimStack:
-    world = World(OccupancyGrid(grid.geometry, grid.data.copy()), name="trial", start_pose=start)
+def _fresh(
+    grid: OccupancyGrid,
+    start: Pose2D,
+    seed: int,
+    obstacles=(),
+    *,
+    controller: str | None = None,
+    safety: bool = True,
+    profile: str = "skid4",
+    world: World | None = None,
+) -> SimStack:
+    if world is None:
+        world = World(OccupancyGrid(grid.geometry, grid.data.copy()), name="trial", start_pose=start)
     for poly in obstacles:
         world.add_polygon(poly)
-    stack = build_sim_stack(grid, world, start, seed=seed)
+    stack = build_sim_stack(grid, world, start, seed=seed, controller=controller, profile=profile)
+    if safety:
+        from robot.safety import SafetyFilter
+
+        stack.session.safety = SafetyFilter(stack.driver.profile)
     stack.localization.set_initial_pose(start)
     return stack
+
+
+def _label(name: str, controller: str | None) -> str:
+    return name if controller is None else f"{name} ({controller})"
 
 
 def _timed(name: str, fn) -> SetResult:
@@ -132,7 +159,13 @@ def _timed(name: str, fn) -> SetResult:
 
 
 def straight_trials(
-    n: int = 20, seed: int = 0, timeout: float = 60.0, on_trial: OnTrial | None = None
+    n: int = 50,
+    seed: int = 0,
+    timeout: float = 60.0,
+    on_trial: OnTrial | None = None,
+    *,
+    controller: str | None = None,
+    safety: bool = True,
 ) -> SetResult:
     """No obstacle, straight: a 10 x 4 m room, goal 2..5 m straight ahead of the start heading."""
     grid = _box(10.0, 4.0)
@@ -146,17 +179,23 @@ def straight_trials(
             start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
             if rng.random() < 0.5:  # half of them the other way
                 start, goal = Pose2D(goal.x, y, math.pi), Pose2D(start.x, y, math.pi)
-            stack = _fresh(grid, start, seed * 1000 + i)
+            stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
             try:
                 out.trials.append(_run(stack, f"straight {i}", start, goal, timeout, on_trial))
             finally:
                 stack.session.close()
 
-    return _timed("straight", run)
+    return _timed(_label("straight", controller), run)
 
 
 def turn_trials(
-    n: int = 20, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None
+    n: int = 50,
+    seed: int = 0,
+    timeout: float = 90.0,
+    on_trial: OnTrial | None = None,
+    *,
+    controller: str | None = None,
+    safety: bool = True,
 ) -> SetResult:
     """No obstacle, with turns: from the far end of the L's horizontal leg round the corner to the
     vertical leg, facing along it (a left turn of 90 degrees plus the approach)."""
@@ -167,17 +206,23 @@ def turn_trials(
         for i in range(n):
             start = Pose2D(float(rng.uniform(5.0, 7.0)), float(rng.uniform(0.7, 1.3)), math.pi)
             goal = Pose2D(float(rng.uniform(0.7, 1.3)), float(rng.uniform(5.0, 7.0)), math.pi / 2)
-            stack = _fresh(grid, start, seed * 1000 + i)
+            stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
             try:
                 out.trials.append(_run(stack, f"turn {i}", start, goal, timeout, on_trial))
             finally:
                 stack.session.close()
 
-    return _timed("turns", run)
+    return _timed(_label("turns", controller), run)
 
 
 def fixed_obstacle_trials(
-    n: int = 20, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None
+    n: int = 50,
+    seed: int = 0,
+    timeout: float = 90.0,
+    on_trial: OnTrial | None = None,
+    *,
+    controller: str | None = None,
+    safety: bool = True,
 ) -> SetResult:
     """A fixed obstacle the map does not have: a 30 x 30 cm box midway on the straight line."""
     grid = _box(10.0, 4.0)
@@ -196,13 +241,111 @@ def fixed_obstacle_trials(
                 (cx + 0.15, cy + 0.15),
                 (cx - 0.15, cy + 0.15),
             ]
-            stack = _fresh(grid, start, seed * 1000 + i, obstacles=[box])
+            stack = _fresh(
+                grid, start, seed * 1000 + i, obstacles=[box], controller=controller, safety=safety
+            )
             try:
                 out.trials.append(_run(stack, f"obstacle {i}", start, goal, timeout, on_trial))
             finally:
                 stack.session.close()
 
-    return _timed("fixed obstacle", run)
+    return _timed(_label("fixed obstacle", controller), run)
+
+
+def person_trials(
+    n: int = 50,
+    seed: int = 0,
+    timeout: float = 90.0,
+    on_trial: OnTrial | None = None,
+    *,
+    controller: str | None = None,
+    safety: bool = True,
+) -> SetResult:
+    """Source A's moving obstacle: a person waits 0.8-1.3 m beside the straight line, past its
+    middle; when the robot comes within that offset + 0.3-0.6 m of them (so it always does, about
+    0.8-1.2 m before passing) they step in ~0.3 m ahead of its front (leading its motion), stand
+    2-4 s and step back. The robot must stop or go round, then reach
+    the goal, without touching them."""
+    grid = _box(10.0, 4.0)
+    rng = np.random.default_rng(seed)
+
+    def run(out: SetResult) -> None:
+        for i in range(n):
+            y = float(rng.uniform(1.6, 2.4))
+            x0 = float(rng.uniform(1.0, 2.0))
+            d = float(rng.uniform(5.0, 7.0))
+            start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
+            side = 1.0 if y < 2.0 else -1.0  # the wider side of the room
+            px = x0 + d * float(rng.uniform(0.4, 0.6))
+            offset = float(rng.uniform(0.8, 1.3))
+            py = y + side * offset
+            stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
+            stack.driver.people.add_step_in(
+                px,
+                py,
+                trigger_distance=offset + float(rng.uniform(0.3, 0.6)),
+                dwell=float(rng.uniform(2.0, 4.0)),
+                speed=float(rng.uniform(0.8, 1.2)),
+            )
+            try:
+                out.trials.append(_run(stack, f"person {i}", start, goal, timeout, on_trial))
+            finally:
+                stack.session.close()
+
+    return _timed(_label("person steps in", controller), run)
+
+
+GREENHOUSE_AISLES = (2.6, 4.4, 6.2, 8.0)
+"""Centre lines (y, m) of the stock greenhouse's four aisles; rows run along x from 2.5 to 17.5."""
+
+
+def greenhouse_row_trials(
+    n: int = 50,
+    seed: int = 0,
+    timeout: float = 120.0,
+    on_trial: OnTrial | None = None,
+    *,
+    controller: str | None = None,
+    safety: bool = True,
+    profile: str = "omni4",
+) -> SetResult:
+    """Source C's row run: from one headland, down a whole aisle (15 m of rows), to the other
+    headland, past the aisle's unmapped mounds / puddles; aisle, direction and the exact start and
+    goal vary per trial. The scenario's workers are left out (people have their own set)."""
+    from maps.stock import stock_world_path
+    from robot.sim.scenario import load_scenario, sidecar_path
+
+    path = stock_world_path("greenhouse")
+    base = World.from_yaml(path)
+    grid = base.grid
+    features = load_scenario(sidecar_path(path)).obstacles
+    rng = np.random.default_rng(seed)
+
+    def run(out: SetResult) -> None:
+        for i in range(n):
+            y = GREENHOUSE_AISLES[int(rng.integers(len(GREENHOUSE_AISLES)))] + float(rng.uniform(-0.1, 0.1))
+            west, east = float(rng.uniform(1.0, 1.6)), float(rng.uniform(18.2, 18.6))
+            start, goal = Pose2D(west, y, 0.0), Pose2D(east, y, 0.0)
+            if rng.random() < 0.5:
+                start, goal = Pose2D(east, y, math.pi), Pose2D(west, y, math.pi)
+            world = World.from_yaml(path, start_pose=start)
+            for f in features:
+                world.add_polygon(f.polygon, kind=f.kind)
+            stack = _fresh(
+                grid,
+                start,
+                seed * 1000 + i,
+                controller=controller,
+                safety=safety,
+                profile=profile,
+                world=world,
+            )
+            try:
+                out.trials.append(_run(stack, f"row {i}", start, goal, timeout, on_trial))
+            finally:
+                stack.session.close()
+
+    return _timed(_label("greenhouse rows", controller), run)
 
 
 def _free_poses(stack: SimStack, clearance: float, rng: np.random.Generator, k: int) -> np.ndarray:
@@ -223,13 +366,14 @@ def random_goal_trials(
     timeout: float = 90.0,
     clearance: float = 0.4,
     on_trial: OnTrial | None = None,
+    controller: str | None = None,
 ) -> SetResult:
     """``n`` random reachable goals in a stock world, driven one after the other (see module doc)."""
     from maps.stock import stock_world_path
     from nav.planning import PlannerError
 
     world = World.from_yaml(stock_world_path(world_name))
-    stack = build_sim_stack(world.grid, world, world.start_pose, seed=seed)
+    stack = build_sim_stack(world.grid, world, world.start_pose, seed=seed, controller=controller)
     stack.localization.set_initial_pose(world.start_pose)
     rng = np.random.default_rng(seed)
 
@@ -247,10 +391,15 @@ def random_goal_trials(
             goal = Pose2D(float(x), float(y), float(rng.uniform(-math.pi, math.pi)))
             cm = stack.navigation.global_costmap
             try:  # reachable from where the robot stands (the issue's "random reachable goals")
-                stack.navigation.planner.plan(cm, stack.session.pose, goal)
+                plan = stack.navigation.planner.plan(cm, stack.session.pose, goal)
             except PlannerError:
                 continue
-            trial = _run(stack, f"{world_name} {out.n}", here, goal, timeout, on_trial)
+            # Goals 1.5-8 m away can be 20+ m apart by corridor (office): a route of L m takes at
+            # least L / max_vel_x, so the limit is the larger of ``timeout`` and twice that.
+            seg = np.diff(np.asarray(plan.poses)[:, :2], axis=0)
+            route = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+            limit = max(timeout, 2.0 * route / stack.driver.profile.limits.max_vel_x)
+            trial = _run(stack, f"{world_name} {out.n}", here, goal, limit, on_trial)
             out.trials.append(trial)
             if not trial.result.reached:
                 # An operator would rescue a robot that gave up (often wedged against something

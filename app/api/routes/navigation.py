@@ -18,11 +18,14 @@ class CostmapViewIn(StrictModel):
 
 
 class GoalIn(StrictModel):
-    """A goal pose in the map frame: metres and radians. NaN/inf are refused (422)."""
+    """A goal pose in the map frame: metres and radians. NaN/inf are refused (422). ``controller``
+    picks the local controller for this request ("dwa" | "teb"; default: the profile's); in a list
+    of waypoints every goal that names one must name the same."""
 
     x: float
     y: float
     theta: float = 0.0
+    controller: Literal["dwa", "teb"] | None = None
 
 
 def _feature(rt: Any):
@@ -55,7 +58,8 @@ def get_navigation(rt: RuntimeDep):
     responses={
         409: {"description": "not localized, e-stop, fault, or the mode does not allow navigating"},
         422: {
-            "description": "goal off the map, in an obstacle or its inscribed radius (+ nearest free pose)"
+            "description": "goal off the map, in an obstacle or its inscribed radius (+ nearest free "
+            "pose), or an unknown or conflicting controller"
         },
     },
 )
@@ -68,8 +72,14 @@ def post_goals(body: GoalIn | list[GoalIn], rt: RuntimeDep):
     goals = body if isinstance(body, list) else [body]
     if not goals:
         return JSONResponse({"detail": "goals: give at least one goal"}, status_code=422)
+    named = {g.controller for g in goals if g.controller is not None}
+    if len(named) > 1:
+        return JSONResponse(
+            {"detail": f"controller: one request drives with one controller, got {sorted(named)}"},
+            status_code=422,
+        )
     try:
-        nav.set_goals([Pose2D(g.x, g.y, g.theta) for g in goals])
+        nav.set_goals([Pose2D(g.x, g.y, g.theta) for g in goals], named.pop() if named else None)
     except GoalRejected as exc:
         return JSONResponse(exc.as_dict(), status_code=422)
     except NavigationRefused as exc:
