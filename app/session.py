@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import logging
 import math
+import sys
 import threading
 import time
 from collections import deque
@@ -209,6 +210,10 @@ class Session:
         if self._thread is not None:
             return
         self._stop.clear()
+        if not self.clock.is_virtual:
+            # The loop shares the GIL with the web server's event loop: with CPython's default 5 ms
+            # switch interval every GIL hand-back inside a tick can cost the loop up to 5 ms under load.
+            sys.setswitchinterval(min(sys.getswitchinterval(), 0.001))
         self._thread = threading.Thread(target=self._run, name="control-loop", daemon=True)
         self._thread.start()
 
