@@ -61,3 +61,24 @@ def test_greenhouse_trial_world_has_mounds_the_map_lacks() -> None:
         ys = np.linspace(aisle - 0.6, aisle + 0.6, 49)
         free = world.is_free(np.column_stack((np.full(ys.size, o.center[0]), ys)))
         assert free.sum() * (ys[1] - ys[0]) >= 0.5
+
+
+def test_amcl_does_not_settle_inside_the_l_corridors_solid_core() -> None:
+    """TEB turns trial 34 (seed 0): the operator's initial pose is right, but the Gaussian cloud
+    round it reaches into the L's solid 6 x 6 m core, where every beam endpoint lands on an
+    occupied cell (a perfect likelihood-field fit). The first update used to jump 1.9 m into the
+    wall and the planner failed with StartOccupied; a particle inside a wall now gets no weight."""
+    from bench.scenarios.suite import _fresh, _l_corridor
+    from nav.types import Pose2D
+
+    start = Pose2D(6.636241941941821, 1.0759038774518521, np.pi)
+    stack = _fresh(_l_corridor(), start, 34, controller="teb")
+    try:
+        s = stack.session
+        for _ in range(3):
+            s.clock.sleep_until(s.clock.now() + s.period)
+            s.step()
+        assert stack.localization.updates >= 1
+        assert s.pose.distance_to(stack.driver.truth_pose) < 0.2
+    finally:
+        stack.session.close()

@@ -3,6 +3,7 @@ the path (diff and omni), warm start, failures and options."""
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -11,9 +12,9 @@ import pytest
 from bench.teb import corridor, omni_options, skid_options, straight_path
 from nav.control import ControllerError, InvalidPath, NoValidControl
 from nav.control.errors import PatienceExceeded
-from nav.control.teb import DistanceField, TebController, TebDebug
+from nav.control.teb import DistanceField, TebController, TebDebug, band_fold
 from nav.control.teb_options import TebConfigError, TebOptions
-from nav.types import Costmap, Path, Pose2D, Twist2D, wrap_angle
+from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
 
 SKID_INSCRIBED = 0.10
 DIFF = skid_options()
@@ -171,6 +172,56 @@ def test_warm_start_keeps_the_band_around_the_obstacle() -> None:
     assert not fresh.warm_started
 
 
+def test_band_fold_measures_how_far_a_band_runs_backwards() -> None:
+    ref = straight_path(3.0).poses
+    xs = np.linspace(0.0, 2.0, 21)
+    forward = np.column_stack((xs, 0.2 * np.sin(xs), np.zeros_like(xs)))
+    assert band_fold(forward, ref) == pytest.approx(0.0, abs=1e-9)
+    # out 1.5 m, back 1.0 m, out again: the band doubles back by 1 m
+    xs = np.concatenate((np.linspace(0, 1.5, 16), np.linspace(1.4, 0.5, 10), np.linspace(0.6, 2.0, 15)))
+    folded = np.column_stack((xs, np.zeros_like(xs), np.zeros_like(xs)))
+    assert band_fold(folded, ref) == pytest.approx(1.0, abs=1e-6)
+
+
+def _open_floor() -> Costmap:
+    geo = GridGeometry(0.05, 240, 80, Pose2D(-6.0, -2.0, 0.0))
+    return Costmap(geo, np.zeros((80, 240), np.uint8))
+
+
+def _polyline(*corners: tuple[float, float], step: float = 0.05) -> Path:
+    """A path through ``corners`` ending at heading 0 (the navigator sets the goal's heading last)."""
+    pts = [np.asarray(corners[0], float)]
+    for a, b in itertools.pairwise(corners):
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        k = max(int(np.ceil(np.hypot(*(b - a)) / step)), 1)
+        pts += [a + (b - a) * t for t in np.linspace(0, 1, k + 1)[1:]]
+    xy = np.array(pts)
+    th = np.arctan2(*np.diff(xy[:, ::-1], axis=0).T)
+    return Path(np.column_stack((xy, np.append(th, 0.0))))
+
+
+@pytest.mark.parametrize("kind", ["diff", "omni"])
+def test_replan_onto_another_route_reinitializes_the_band(kind: str) -> None:
+    """A replan to the same goal by another way (the greenhouse's blocked aisle: back out and round)
+    moves the local goal behind the robot. Extending the old band to it folded the band back on
+    itself; TEB re-initializes instead (force_reinit_new_goal_dist) and never sends a folded band."""
+    cm = _open_floor()
+    ctl = TebController(KINDS[kind])
+    ctl.set_path(_polyline((0.0, 0.0), (5.0, 0.0)))
+    pose, vel = Pose2D(), Twist2D()
+    for _ in range(5):
+        cmd, dbg = ctl.compute(pose, vel, cm)
+        pose, vel = integrate(pose, cmd, 0.1), cmd
+    assert dbg.warm_started and band_fold(dbg.band, dbg.reference) < 0.05
+    # same goal, new route: back to x = -3, across, and along y = 1.2 to the goal
+    ctl.set_path(_polyline((pose.x, pose.y), (-3.0, 0.0), (-3.0, 1.2), (5.0, 1.2), (5.0, 0.0)))
+    _, dbg = ctl.compute(pose, vel, cm)
+    assert not dbg.warm_started
+    assert dbg.local_goal[0] < pose.x - 1.0  # the local goal is behind the robot now
+    assert band_fold(dbg.band, dbg.reference) <= ctl.options.fold_reinit_dist
+    assert dbg.band[1:, 0].max() < pose.x + 0.3  # the band heads back, not out and round
+
+
 # --- goal, failures -----------------------------------------------------------------------------
 
 
@@ -233,6 +284,8 @@ def test_interface_errors() -> None:
         ({"min_obstacle_dist": 0.5, "inflation_dist": 0.2}, "inflation_dist"),
         ({"solver": "gauss_newton"}, "solver"),
         ({"solver_ftol": 1.0}, "solver_ftol"),
+        ({"force_reinit_new_goal_dist": 0.0}, "force_reinit_new_goal_dist"),
+        ({"fold_reinit_dist": -1.0}, "fold_reinit_dist"),
     ],
 )
 def test_bad_options_name_the_field(kw: dict, field: str) -> None:

@@ -19,6 +19,7 @@
 Every trial localizes with AMCL from the operator's initial pose (the true start), as a user would.
 ``controller`` ("dwa" | "teb", None: the profile's) picks the local controller; ``safety`` installs
 the server's safety filter (``robot.safety.SafetyFilter``) below it, as ``navdeck serve`` does.
+``only`` (trial indices) runs just those trials of the same seeded set, to reproduce a failure.
 """
 
 from __future__ import annotations
@@ -166,6 +167,7 @@ def straight_trials(
     *,
     controller: str | None = None,
     safety: bool = True,
+    only: frozenset[int] | None = None,
 ) -> SetResult:
     """No obstacle, straight: a 10 x 4 m room, goal 2..5 m straight ahead of the start heading."""
     grid = _box(10.0, 4.0)
@@ -179,6 +181,8 @@ def straight_trials(
             start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
             if rng.random() < 0.5:  # half of them the other way
                 start, goal = Pose2D(goal.x, y, math.pi), Pose2D(start.x, y, math.pi)
+            if only is not None and i not in only:
+                continue
             stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
             try:
                 out.trials.append(_run(stack, f"straight {i}", start, goal, timeout, on_trial))
@@ -196,6 +200,7 @@ def turn_trials(
     *,
     controller: str | None = None,
     safety: bool = True,
+    only: frozenset[int] | None = None,
 ) -> SetResult:
     """No obstacle, with turns: from the far end of the L's horizontal leg round the corner to the
     vertical leg, facing along it (a left turn of 90 degrees plus the approach)."""
@@ -206,6 +211,8 @@ def turn_trials(
         for i in range(n):
             start = Pose2D(float(rng.uniform(5.0, 7.0)), float(rng.uniform(0.7, 1.3)), math.pi)
             goal = Pose2D(float(rng.uniform(0.7, 1.3)), float(rng.uniform(5.0, 7.0)), math.pi / 2)
+            if only is not None and i not in only:
+                continue
             stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
             try:
                 out.trials.append(_run(stack, f"turn {i}", start, goal, timeout, on_trial))
@@ -223,6 +230,7 @@ def fixed_obstacle_trials(
     *,
     controller: str | None = None,
     safety: bool = True,
+    only: frozenset[int] | None = None,
 ) -> SetResult:
     """A fixed obstacle the map does not have: a 30 x 30 cm box midway on the straight line."""
     grid = _box(10.0, 4.0)
@@ -241,6 +249,8 @@ def fixed_obstacle_trials(
                 (cx + 0.15, cy + 0.15),
                 (cx - 0.15, cy + 0.15),
             ]
+            if only is not None and i not in only:
+                continue
             stack = _fresh(
                 grid, start, seed * 1000 + i, obstacles=[box], controller=controller, safety=safety
             )
@@ -260,6 +270,7 @@ def person_trials(
     *,
     controller: str | None = None,
     safety: bool = True,
+    only: frozenset[int] | None = None,
 ) -> SetResult:
     """Source A's moving obstacle: a person waits 0.8-1.3 m beside the straight line, past its
     middle; when the robot comes within that offset + 0.3-0.6 m of them (so it always does, about
@@ -279,13 +290,17 @@ def person_trials(
             px = x0 + d * float(rng.uniform(0.4, 0.6))
             offset = float(rng.uniform(0.8, 1.3))
             py = y + side * offset
+            trigger = offset + float(rng.uniform(0.3, 0.6))
+            dwell, speed = float(rng.uniform(2.0, 4.0)), float(rng.uniform(0.8, 1.2))
+            if only is not None and i not in only:
+                continue
             stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
             stack.driver.people.add_step_in(
                 px,
                 py,
-                trigger_distance=offset + float(rng.uniform(0.3, 0.6)),
-                dwell=float(rng.uniform(2.0, 4.0)),
-                speed=float(rng.uniform(0.8, 1.2)),
+                trigger_distance=trigger,
+                dwell=dwell,
+                speed=speed,
             )
             try:
                 out.trials.append(_run(stack, f"person {i}", start, goal, timeout, on_trial))
@@ -308,6 +323,7 @@ def greenhouse_row_trials(
     controller: str | None = None,
     safety: bool = True,
     profile: str = "omni4",
+    only: frozenset[int] | None = None,
 ) -> SetResult:
     """Source C's row run: from one headland, down a whole aisle (15 m of rows), to the other
     headland, past the aisle's unmapped mounds / puddles; aisle, direction and the exact start and
@@ -328,6 +344,8 @@ def greenhouse_row_trials(
             start, goal = Pose2D(west, y, 0.0), Pose2D(east, y, 0.0)
             if rng.random() < 0.5:
                 start, goal = Pose2D(east, y, math.pi), Pose2D(west, y, math.pi)
+            if only is not None and i not in only:
+                continue
             world = World.from_yaml(path, start_pose=start)
             for f in features:
                 world.add_polygon(f.polygon, kind=f.kind)

@@ -159,6 +159,22 @@ def _nearest_segments(pts: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarr
     return np.argmin(np.einsum("mki,mki->mk", diff, diff), axis=1)
 
 
+def band_fold(poses: np.ndarray, ref: np.ndarray) -> float:
+    """How far (m) a band runs backwards along the reference path ``ref`` at worst: each band segment's
+    displacement is projected on the direction of the reference segment nearest its midpoint, and
+    the result is the largest drop of the accumulated progress below its running maximum (0 for a
+    band that only moves forwards or sideways along the path)."""
+    if len(poses) < 2 or len(ref) < 2:
+        return 0.0
+    a, b = ref[:-1, :2], ref[1:, :2]
+    d = np.diff(poses[:, :2], axis=0)
+    near = _nearest_segments(poses[:-1, :2] + 0.5 * d, a, b)
+    tangent = b[near] - a[near]
+    tangent /= np.maximum(np.hypot(*tangent.T), 1e-12)[:, None]
+    progress = np.concatenate(([0.0], np.cumsum(np.einsum("ij,ij->i", d, tangent))))
+    return float(np.max(np.maximum.accumulate(progress) - progress))
+
+
 def _resample(xy: np.ndarray, theta: np.ndarray, t: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
     """Resample a polyline with headings and cumulative times to ``n`` poses equally spaced in arc
     length; returns ((n, 3) poses, (n,) times)."""
@@ -294,7 +310,15 @@ class TebController:
             band, dts = self._band, self._dts
             dist = np.hypot(band[:, 0] - pose.x, band[:, 1] - pose.y)
             k = int(np.argmin(dist[: max(len(band) // 2, 1) + 1]))
-            if dist[k] < 0.5:
+            # TEB's force_reinit_new_goal_*: a local goal far from the old band's end means the
+            # global path now takes another route; extending the old band to it would fold it.
+            moved = math.hypot(band[-1, 0] - goal[0], band[-1, 1] - goal[1])
+            turned = abs(float(wrap_angle(goal[2] - band[-1, 2])))
+            if (
+                dist[k] < 0.5
+                and moved < o.force_reinit_new_goal_dist
+                and turned < o.force_reinit_new_goal_angular
+            ):
                 warm = True
                 t = np.concatenate(([0.0], np.cumsum(dts)))
                 kept = band[k + 1 : -1]
@@ -310,16 +334,15 @@ class TebController:
                     self._segment_times(np.vstack((kept[-1:] if len(kept) else start[None], ext)))
                 )
                 times = np.concatenate(([0.0], kept_t, ext_t))
+        if warm:
+            poses = self._resampled(start, goal, xy, th, times)
+            if band_fold(poses, ref) > o.fold_reinit_dist:
+                warm = False  # the kept part runs against the path: start again from the path
         if not warm:
             xy = np.vstack((start[:2], ref[:, :2]))
             th = np.concatenate(([start[2]], ref[:, 2]))
             times = np.concatenate(([0.0], np.cumsum(self._segment_times(np.column_stack((xy, th))))))
-        length = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
-        n = self._band_size(length)
-        poses, t = _resample(xy, th, times, n)
-        poses[0] = start
-        poses[-1, :2] = goal[:2]
-        poses[-1, 2] = poses[-2, 2] + wrap_angle(goal[2] - poses[-2, 2])
+            poses = self._resampled(start, goal, xy, th, times)
         if not o.holonomic and not warm:
             chord = np.arctan2(*np.diff(poses[:, 1::-1], axis=0).T)
             poses[1:-1, 2] = chord[1:]
@@ -328,6 +351,17 @@ class TebController:
         # belong to poses now behind the robot, and carrying them over slows the band down.
         dts = self._segment_times(poses, math.hypot(velocity.vx, velocity.vy), stop)
         return poses, dts, warm
+
+    def _resampled(
+        self, start: np.ndarray, goal: np.ndarray, xy: np.ndarray, th: np.ndarray, times: np.ndarray
+    ) -> np.ndarray:
+        """The polyline (xy, th) resampled to the band's size, pinned to ``start`` and ``goal``."""
+        length = float(np.sum(np.hypot(*np.diff(xy, axis=0).T)))
+        poses, _ = _resample(xy, th, times, self._band_size(length))
+        poses[0] = start
+        poses[-1, :2] = goal[:2]
+        poses[-1, 2] = poses[-2, 2] + wrap_angle(goal[2] - poses[-2, 2])
+        return poses
 
     def _push_out(self, poses: np.ndarray, dfield: DistanceField) -> None:
         """Homotopy seed: move interior poses within ``min_obstacle_dist`` of an obstacle sideways
@@ -438,6 +472,12 @@ class TebController:
         t0 = time.perf_counter()
         try:
             poses, dts, res = self.optimize(poses, dts, local, dfield, v0, stop)
+            if warm and band_fold(poses, local) > o.fold_reinit_dist:
+                # The warm start led the optimizer into a band that doubles back (its first
+                # command would turn the robot round): optimize once more from the path.
+                self._band = self._dts = None
+                poses, dts, warm = self._initial_band(pose, velocity, local, dfield, stop)
+                poses, dts, res = self.optimize(poses, dts, local, dfield, v0, stop)
         except ValueError as exc:  # non-finite residuals: a degenerate band
             self._band = self._dts = None
             return self._fail(f"band optimization failed: {exc}", poses, dts, local, warm)
@@ -516,4 +556,4 @@ class TebController:
         return Twist2D(0.0, 0.0, wz), debug
 
 
-__all__ = ["DistanceField", "TebController", "TebDebug", "segment_velocities"]
+__all__ = ["DistanceField", "TebController", "TebDebug", "band_fold", "segment_velocities"]

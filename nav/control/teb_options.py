@@ -63,6 +63,15 @@ class TebOptions:
     between two poses, which TEB's dt-based sizing allows for a fast robot)."""
     feasibility_check_no_poses: int = 5
     """Band poses footprint-checked against the costmap before a command is sent. TEB 5."""
+    force_reinit_new_goal_dist: float = 1.0
+    """Re-initialize the band from the global path instead of warm-starting it when the local goal
+    moved farther than this from the previous band's end, m (a replan took another route). TEB 1.0."""
+    force_reinit_new_goal_angular: float = 0.5 * math.pi
+    """... or its heading turned by more than this, rad. TEB 0.5 pi."""
+    fold_reinit_dist: float = 0.3
+    """A band whose progress along the local path runs backwards by more than this (m) has folded
+    back on itself (a warm start from another route, or an optimizer detour): it is re-initialized
+    from the path (navdeck; TEB's ``detectDetoursBackwards`` deletes such bands)."""
     global_plan_overwrite_orientation: bool = True
     """Replace the path's orientations by its segments' directions (diff drive). TEB true."""
 
@@ -135,6 +144,7 @@ class TebOptions:
     def __post_init__(self) -> None:
         positive = ("max_vel_x", "max_vel_theta", "acc_lim_x", "acc_lim_theta", "dt_ref")
         positive += ("max_global_plan_lookahead_dist", "max_pose_separation", "controller_frequency")
+        positive += ("force_reinit_new_goal_dist", "force_reinit_new_goal_angular", "fold_reinit_dist")
         for name in positive:
             v = getattr(self, name)
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0):

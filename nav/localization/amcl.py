@@ -292,6 +292,12 @@ class Amcl:
         """Measurement update and the w_slow / w_fast averages (Thrun Table 8.3, lines 4-10)."""
         o = self.options
         logp = self._log_likelihood(self._particles, beams, laser_pose)
+        # The robot cannot stand inside a mapped obstacle. Without this prior a particle inside a
+        # solid block (e.g. the unseen core of an L-shaped corridor) matches every beam perfectly,
+        # since all its endpoints land on occupied cells, and the filter can settle there.
+        in_wall = self._in_wall(self._particles)
+        if in_wall.any() and not in_wall.all():
+            logp = np.where(in_wall, -np.inf, logp)
         logw = np.log(np.maximum(self._weights, 1e-300)) + logp
         total = float(logsumexp(logw))
         self._weights = np.exp(logw - total)
@@ -318,6 +324,14 @@ class Amcl:
             self._w_fast = w_avg
         else:
             self._w_fast += o.recovery_alpha_fast * (w_avg - self._w_fast)
+
+    def _in_wall(self, particles: np.ndarray) -> np.ndarray:
+        """(N,) True where a particle's position is an occupied map cell."""
+        rows, cols = self.grid.geometry.world_to_cell(particles[:, :2])
+        inside = self.grid.geometry.in_bounds(rows, cols)
+        out = np.zeros(particles.shape[0], dtype=bool)
+        out[inside] = self._occupied[rows[inside], cols[inside]]
+        return out
 
     def _resample(self) -> None:
         """Low-variance resampling with random-pose injection and a KLD-chosen sample count.
