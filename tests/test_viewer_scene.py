@@ -187,6 +187,7 @@ def test_optional_layers_and_checkboxes(viewer: Viewer) -> None:
     viewer.apply(s0)
     s = viewer.server.scene
     assert not viewer.is_shown("/costmap")  # hidden by default, like Rviz; its checkbox shows it
+    assert s.get_handle_by_name("/costmap").visible is False  # and really hidden in the scene
     viewer.set_layer_enabled("Costmap", True)
     for node in ("/costmap", "/plan/local", "/goal", "/graph/edges"):
         assert viewer.is_shown(node), node

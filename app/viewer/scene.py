@@ -321,8 +321,10 @@ class Viewer:
         h["/costmap"] = self.costmap_layer.root
         self._has_data = {name: False for name in LAYERS.values()}
         self._has_data["/robot/scan"] = True  # shown empty until a scan arrives
-        # Like Rviz's default displays: the costmap overlay starts hidden so the map stays readable.
-        self._shown = {name: name not in HIDDEN_BY_DEFAULT for name in LAYERS.values()}
+        # Like Rviz's default displays: the costmap overlay starts hidden (its checkbox starts off) so
+        # the map stays readable. No layer's state is assumed: the first refresh sets every handle's
+        # visibility (the nodes are created visible, so an assumed "hidden" would never be applied).
+        self._shown = {}
         for name in LAYERS.values():
             self._refresh(name)
         s.on_click()(self._on_scene_click)
