@@ -154,7 +154,11 @@ export function init() {
   attachKeys(window);
   const frame = $("#viewer");
   // The 3D view is same-origin: listen to its keys too, so driving works after clicking into it.
-  frame.addEventListener("load", () => { try { attachKeys(frame.contentWindow); } catch { /* cross-origin */ } });
+  // boot.js starts loading it before this module runs, so it may have loaded already (then no "load"
+  // event comes); attaching twice is harmless.
+  const attachFrame = () => { try { attachKeys(frame.contentWindow); } catch { /* cross-origin */ } };
+  frame.addEventListener("load", attachFrame);
+  try { if (frame.contentDocument?.readyState === "complete") attachFrame(); } catch { /* cross-origin */ }
   setInterval(() => { if (sources.size) { lastSentZero = false; send(); } }, 100); // feed the deadman
   connect();
 }
