@@ -235,6 +235,8 @@ def test_teleop_through_the_running_app_is_recorded(tmp_path: Path) -> None:
     run = store.detail(rid)  # the server shut down: the run was finished as stopped
     assert run["kind"] == "teleop" and run["outcome"] == "stopped" and run["end_reason"] == "server shut down"
     assert next(e["to"] for e in run["events"] if e["type"] == "mode") == "teleop"
-    assert run["summary"]["distance_m"] == pytest.approx(travelled, abs=0.03)
+    # samples are taken at the recorder's rate: on a loaded host the last one may trail the odometry
+    # by a few ticks of the still-decelerating robot
+    assert run["summary"]["distance_m"] == pytest.approx(travelled, abs=0.06)
     assert 0.15 < run["summary"]["distance_m"] < 0.45  # 1.5 s at 0.2 m/s, plus up to the 0.5 s deadman
     assert run["summary"]["samples"] >= 10 * (run["summary"]["duration_s"] - 0.3)
