@@ -41,7 +41,8 @@ def test_drive_forward_then_deadman_stops(live_server) -> None:
         assert abs(session.velocity.vx) < 0.02
         travelled = session.pose.distance_to(start)
     assert 0.12 < moved_while_driving < 0.26, moved_while_driving
-    assert travelled < 0.3
+    # 1 s of commands + the 0.5 s deadman at 0.2 m/s + braking, with a tick of scheduling slack
+    assert travelled < 0.36
 
 
 def test_malformed_message_errors_and_stops_but_keeps_connection(live_server) -> None:
