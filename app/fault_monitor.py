@@ -9,8 +9,8 @@ still names a cause. Everything here is O(beams) numpy per scan or O(1) per tick
   ``lidar_garbage_scans`` of them in a row fault. Isolated bad beams are sanitized to NaN (REP-117
   "invalid") so no consumer sees a negative or absurd range. REP-117's +inf (no return) and -inf (closer
   than ``range_min``, the simulator's and some drivers' convention) are legitimate and kept.
-- Encoder slip vs IMU: the wheels' yaw rate (encoders through the kinematics) is compared with the
-  gyro's (minus the odometry's zero-velocity bias estimate). Wheels reporting straight or standing while
+- Encoder slip vs IMU: the wheels' yaw rate is compared with the gyro's minus its zero-velocity bias
+  estimate, both as the odometry measured them for its update. Wheels reporting straight or standing while
   the gyro turns is the gyro's fault ("imu": a bias jump); wheels turning while the gyro does not is a
   wheel's ("encoder slip": a slipping wheel or an encoder losing counts). Either must hold for most of
   a window (a leaky timer) before it faults, so single noisy ticks and brief wheel spin do not.
@@ -20,16 +20,13 @@ still names a cause. Everything here is O(beams) numpy per scan or O(1) per tick
 
 from __future__ import annotations
 
-import math
 from collections import deque
 from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nav.types import LaserScan
-from robot.base import ImuReading, WheelTicks
-from robot.kinematics import omni_forward, virtual_wheels
-from robot.profiles import RobotProfile
+from robot.odometry import OdometryState
 
 
 @dataclass(frozen=True)
@@ -80,16 +77,12 @@ def classify_scan(scan: LaserScan, garbage_fraction: float) -> tuple[LaserScan, 
 
 
 class FaultMonitor:
-    def __init__(
-        self, profile: RobotProfile, period: float, options: FaultMonitorOptions | None = None
-    ) -> None:
-        self.profile = profile
+    def __init__(self, period: float, options: FaultMonitorOptions | None = None) -> None:
         self.period = period
         self.options = options or FaultMonitorOptions()
         o = self.options
         self._garbage_run = 0
         self._garbage_frac = 0.0
-        self._last_ticks: WheelTicks | None = None
         self._imu = _Leaky(o.imu_hold_s)
         self._slip = _Leaky(o.slip_hold_s)
         self._imu_now = False  # the imu condition held at the latest tick
@@ -119,24 +112,11 @@ class FaultMonitor:
         return None
 
     # ------------------------------------------------------------------ wheels vs gyro
-    def check_motion(self, ticks: WheelTicks, imu: ImuReading | None, gyro_bias: float) -> str | None:
-        """Compare encoder and gyro yaw rates for the interval since the previous ticks."""
-        last, self._last_ticks = self._last_ticks, ticks
-        if last is None or imu is None or not math.isfinite(imu.gyro_z):
+    def check_motion(self, odo: OdometryState) -> str | None:
+        """Compare the wheels' and the gyro's yaw rates of one odometry update."""
+        enc, gyro, dt = odo.encoder_yaw_rate, odo.gyro_yaw_rate, odo.interval
+        if enc is None or gyro is None:
             return None
-        dt = ticks.stamp - last.stamp
-        if not (0.0 < dt <= 1.0):
-            return None
-        p = self.profile
-        travel = (np.asarray(ticks.counts) - np.asarray(last.counts)) * (
-            2.0 * math.pi * p.wheel_radius / p.ticks_per_rev
-        )
-        if p.kinematics == "omni":
-            enc_dth = float(omni_forward(travel, p.omni_radius)[2])
-        else:
-            dl, dr = virtual_wheels(travel)
-            enc_dth = (float(dr) - float(dl)) / p.track_width
-        enc, gyro = enc_dth / dt, imu.gyro_z - gyro_bias
         self._rates = (enc, gyro)
         o = self.options
         self._imu_now = abs(enc) < o.straight_rate and abs(gyro) > o.imu_rate
@@ -144,10 +124,14 @@ class FaultMonitor:
         imu_full = self._imu.update(self._imu_now, dt)
         slip_full = self._slip.update(slip_now, dt)
         if imu_full:
-            return f"imu: gyro turns at {gyro:+.2f} rad/s while the wheels report {enc:+.2f} rad/s"
+            return self._imu_reason()
         if slip_full:
             return f"encoder slip: wheels turn at {enc:+.2f} rad/s, gyro at {gyro:+.2f} rad/s"
         return None
+
+    def _imu_reason(self) -> str:
+        enc, gyro = self._rates
+        return f"imu: gyro turns at {gyro:+.2f} rad/s while the wheels report {enc:+.2f} rad/s"
 
     # ------------------------------------------------------------------ loop timing
     def check_period(self, measured: float) -> str | None:
@@ -180,8 +164,7 @@ class FaultMonitor:
         if reason := self.lidar_reason():
             return reason
         if self._imu_now:
-            enc, gyro = self._rates
-            return f"imu: gyro turns at {gyro:+.2f} rad/s while the wheels report {enc:+.2f} rad/s"
+            return self._imu_reason()
         return self.loop_reason()
 
     def on_reset(self) -> None:

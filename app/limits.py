@@ -37,15 +37,36 @@ def _ramp(target: float, current: float, acc: float, decel: float, dt: float) ->
     return current + min(max(target - current, -step), step)
 
 
+def _xyz(v: Twist2D) -> tuple[float, float, float]:
+    return v.vx, v.vy, v.wz
+
+
+def _axes(limits: Limits) -> tuple[tuple[float, float], ...]:
+    """(acceleration, deceleration) per axis vx, vy, wz; vy falls back to the x limits."""
+    return (
+        (limits.acc_lim_x, limits.decel_lim_x),
+        (limits.acc_lim_y or limits.acc_lim_x, limits.decel_lim_y or limits.decel_lim_x),
+        (limits.acc_lim_theta, limits.decel_lim_theta),
+    )
+
+
 def limit_acceleration(cmd: Twist2D, previous: Twist2D, limits: Limits, dt: float) -> Twist2D:
     return Twist2D(
-        _ramp(cmd.vx, previous.vx, limits.acc_lim_x, limits.decel_lim_x, dt),
-        _ramp(
-            cmd.vy,
-            previous.vy,
-            limits.acc_lim_y or limits.acc_lim_x,
-            limits.decel_lim_y or limits.decel_lim_x,
-            dt,
+        *(
+            _ramp(target, current, acc, decel, dt)
+            for target, current, (acc, decel) in zip(_xyz(cmd), _xyz(previous), _axes(limits), strict=True)
+        )
+    )
+
+
+def ramp_duration(target: Twist2D, current: Twist2D, limits: Limits) -> float:
+    """Seconds :func:`limit_acceleration` needs at most to bring ``current`` to ``target`` (each axis at
+    the slower of its two rates, so the ramp is certainly complete by then)."""
+    return max(
+        (
+            abs(t - c) / rate
+            for t, c, (acc, decel) in zip(_xyz(target), _xyz(current), _axes(limits), strict=True)
+            if (rate := min(acc, abs(decel) or acc)) > 0
         ),
-        _ramp(cmd.wz, previous.wz, limits.acc_lim_theta, limits.decel_lim_theta, dt),
+        default=0.0,
     )

@@ -23,7 +23,7 @@ import numpy as np
 
 from app.bus import Snapshot, SnapshotBus
 from app.fault_monitor import FaultMonitor, FaultMonitorOptions
-from app.limits import clamp_speed, limit_acceleration
+from app.limits import clamp_speed, limit_acceleration, ramp_duration
 from app.modes import Mode, ModeMachine
 from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
@@ -135,7 +135,7 @@ class Session:
         self.collisions = 0
         self.distance_travelled = 0.0
         self.stats = LoopStats()
-        self.fault_monitor = FaultMonitor(self.profile, self.period, options.faults)
+        self.fault_monitor = FaultMonitor(self.period, options.faults)
         self._teleop = TeleopState()
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
@@ -297,14 +297,7 @@ class Session:
             if cmd is None or not schedule_ramp_end:
                 return
             target, _ = clamp_speed(cmd, self.profile.limits, self.profile.is_omni)
-            lim, sent = self.profile.limits, self.last_command
-            ramps = (  # (gap, acceleration, deceleration) as app.limits.limit_acceleration uses them
-                (target.vx - sent.vx, lim.acc_lim_x, lim.decel_lim_x),
-                (target.vy - sent.vy, lim.acc_lim_y or lim.acc_lim_x, lim.decel_lim_y or lim.decel_lim_x),
-                (target.wz - sent.wz, lim.acc_lim_theta, lim.decel_lim_theta),
-            )
-            rates = [(gap, min(acc, abs(dec) or acc)) for gap, acc, dec in ramps]
-            left = max((abs(gap) / rate for gap, rate in rates if rate > 0), default=0.0)
+            left = ramp_duration(target, self.last_command, self.profile.limits)
             if left > 1e-9:  # 0.5 ms of slack: the ramp is certainly complete when its end is sent
                 self._ramp_end = self._last_send_t + left + 5e-4
 
@@ -343,7 +336,7 @@ class Session:
             odo = self.odometry.update(frame.ticks, frame.imu)
             self.odom_pose, self.velocity, self.wheel_slip = odo.pose, odo.twist, odo.slipping
             self.distance_travelled += prev.distance_to(self.odom_pose)
-            motion_fault = self.fault_monitor.check_motion(frame.ticks, frame.imu, odo.gyro_bias)
+            motion_fault = self.fault_monitor.check_motion(odo)
         self.pose = self.map_to_odom.compose(self.odom_pose)
         if (
             not self._trail

@@ -23,41 +23,24 @@ if TYPE_CHECKING:
 
 TARGET_MS = 50.0
 RES = 0.05
-SKID_FOOTPRINT = ((0.12, 0.10), (-0.12, 0.10), (-0.12, -0.10), (0.12, -0.10))  # skid4's
 OBSTACLE = (1.5, 0.0, 0.15)  # x, y, radius (m) of the bench scenes' obstacle
 
 
 def skid_options(**overrides) -> TebOptions:
-    """TebOptions of the skid4 profile (diff drive, 0.26 m/s)."""
-    from nav.control.teb_options import TebOptions
-
-    base = dict(
-        footprint=SKID_FOOTPRINT,
-        max_vel_x=0.26,
-        max_vel_x_backwards=0.15,
-        max_vel_theta=1.0,
-        acc_lim_x=2.5,
-        acc_lim_theta=3.2,
-    )
-    return TebOptions(**{**base, **overrides})
+    """TebOptions of the skid4 profile (diff drive, 0.26 m/s), as the server builds them."""
+    return _profile_options("skid4", overrides)
 
 
 def omni_options(**overrides) -> TebOptions:
-    """TebOptions of the omni4 profile (holonomic, 1.5 m/s, round 0.25 m)."""
-    from nav.control.teb_options import TebOptions
+    """TebOptions of the omni4 profile (holonomic, 1.5 m/s, round 0.25 m), as the server builds them."""
+    return _profile_options("omni4", overrides)
 
-    base = dict(
-        holonomic=True,
-        robot_radius=0.25,
-        max_vel_x=1.5,
-        max_vel_x_backwards=1.5,
-        max_vel_y=1.5,
-        max_vel_theta=0.5,
-        acc_lim_x=1.0,
-        acc_lim_y=1.0,
-        acc_lim_theta=1.0,
-    )
-    return TebOptions(**{**base, **overrides})
+
+def _profile_options(profile: str, overrides: dict) -> TebOptions:
+    from nav.control.teb_options import TebOptions
+    from robot.profiles import load_profile
+
+    return TebOptions.for_robot(load_profile(profile), **overrides)
 
 
 def corridor(

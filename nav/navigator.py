@@ -146,7 +146,6 @@ class Navigator:
             plan_fn = planner.plan
         self.controller = controller
         self.controllers: dict[str, Controller] = {"custom": controller}
-        self.controller_name = "custom"
         self.goal_checker = goal_checker
         self.progress_checker = progress_checker
         self.options = options or NavigatorOptions()
@@ -211,8 +210,12 @@ class Navigator:
             request_plan=request_plan,
         )
         nav.controllers = controllers
-        nav.controller_name = name
         return nav
+
+    @property
+    def controller_name(self) -> str:
+        """The active controller's key in ``controllers`` ("custom" for one given to the constructor)."""
+        return next((n for n, c in self.controllers.items() if c is self.controller), "custom")
 
     def select_controller(self, name: str) -> None:
         """Make ``controllers[name]`` the active controller and reset it (a goal that asks for DWA or
@@ -222,7 +225,6 @@ class Navigator:
         if new is not self.controller:
             self.controller.reset()
             self.controller = new
-            self.controller_name = name
         new.reset()
         self._held = None
         if self._path is not None:

@@ -50,6 +50,9 @@ class OdometryState:
     twist: Twist2D
     slipping: bool = False
     gyro_bias: float = 0.0
+    interval: float = 0.0  # seconds since the previous reading (0 for the first)
+    encoder_yaw_rate: float | None = None  # rad/s from the wheels over ``interval`` (None: not measured)
+    gyro_yaw_rate: float | None = None  # rad/s from the gyro minus the bias, whether or not fused
 
 
 class WheelOdometry:
@@ -67,6 +70,7 @@ class WheelOdometry:
         self.slipping = False
         self._last: WheelTicks | None = None
         self._bias_seeded = False
+        self._rates: tuple[float, float | None, float | None] = (0.0, None, None)  # interval, enc, gyro
 
     def reset(self, pose: Pose2D | None = None) -> None:
         """Restart integration at ``pose`` (odom origin by default); keeps the gyro bias."""
@@ -77,7 +81,7 @@ class WheelOdometry:
     @property
     def state(self) -> OdometryState:
         stamp = self._last.stamp if self._last is not None else 0.0
-        return OdometryState(stamp, self.pose, self.twist, self.slipping, self.gyro_bias)
+        return OdometryState(stamp, self.pose, self.twist, self.slipping, self.gyro_bias, *self._rates)
 
     def update(self, ticks: WheelTicks, imu: ImuReading | None = None) -> OdometryState:
         """Fold in a new cumulative tick reading. ``imu.gyro_z`` is taken as the mean yaw rate over
@@ -89,6 +93,7 @@ class WheelOdometry:
                 f"expected {expected} wheel counts for {self.profile.kinematics}, got {counts.shape}"
             )
         last, self._last = self._last, WheelTicks(ticks.stamp, counts)
+        self._rates = (0.0, None, None)
         if last is None:
             return self.state
         dt = ticks.stamp - last.stamp
@@ -110,6 +115,9 @@ class WheelOdometry:
                 0.0,
                 (float(dr) - float(dl)) / self.profile.track_width,
             )
+        if timing_ok:  # the raw yaw rates, for fault monitors comparing wheels with the gyro
+            gyro = imu.gyro_z - self.gyro_bias if imu is not None and math.isfinite(imu.gyro_z) else None
+            self._rates = (dt, dth_enc / dt, gyro)
         dth = dth_enc
         if gyro_ok and dt > 0:
             dth = 0.0 if still else (imu.gyro_z - self.gyro_bias) * dt  # type: ignore[union-attr]

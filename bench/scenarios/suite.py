@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -159,155 +159,150 @@ def _timed(name: str, fn) -> SetResult:
     return out
 
 
-def straight_trials(
-    n: int = 50,
-    seed: int = 0,
-    timeout: float = 60.0,
-    on_trial: OnTrial | None = None,
-    *,
-    controller: str | None = None,
-    safety: bool = True,
-    only: frozenset[int] | None = None,
+@dataclass(frozen=True)
+class Trial:
+    """One drawn trial of a fresh-robot set: where it starts and goes, and what its world adds."""
+
+    start: Pose2D
+    goal: Pose2D
+    obstacles: tuple = ()  # polygons in the world but not on the map
+    world: World | None = None  # a prepared world instead of the map's copy
+    setup: Callable[[SimStack], None] | None = None  # e.g. a person waiting to step in
+
+
+@dataclass(frozen=True)
+class SetOptions:
+    """What every fresh-robot set takes besides its own geometry (see the ``*_trials`` functions)."""
+
+    seed: int = 0
+    on_trial: OnTrial | None = None
+    controller: str | None = None
+    safety: bool = True
+    only: frozenset[int] | None = None  # rerun just these trials of the same seeded set
+    profile: str = "skid4"
+
+
+def _run_set(
+    label: str, prefix: str, grid: OccupancyGrid, trials: Iterator[Trial], timeout: float, o: SetOptions
 ) -> SetResult:
-    """No obstacle, straight: a 10 x 4 m room, goal 2..5 m straight ahead of the start heading."""
-    grid = _box(10.0, 4.0)
-    rng = np.random.default_rng(seed)
+    """Drive each drawn trial on a fresh simulated robot. Every trial is drawn (so the random
+    stream, and with it each trial, stays the same) even when ``o.only`` skips driving it."""
 
     def run(out: SetResult) -> None:
-        for i in range(n):
+        for i, trial in enumerate(trials):
+            if o.only is not None and i not in o.only:
+                continue
+            stack = _fresh(
+                grid,
+                trial.start,
+                o.seed * 1000 + i,
+                trial.obstacles,
+                controller=o.controller,
+                safety=o.safety,
+                profile=o.profile,
+                world=trial.world,
+            )
+            try:
+                if trial.setup is not None:
+                    trial.setup(stack)
+                out.trials.append(_run(stack, f"{prefix} {i}", trial.start, trial.goal, timeout, o.on_trial))
+            finally:
+                stack.session.close()
+
+    return _timed(_label(label, o.controller), run)
+
+
+def straight_trials(
+    n: int = 50, seed: int = 0, timeout: float = 60.0, on_trial: OnTrial | None = None, **kw
+) -> SetResult:
+    """No obstacle, straight: a 10 x 4 m room, goal 2..5 m straight ahead of the start heading.
+    Keywords: those of :class:`SetOptions` (controller, safety, only, profile)."""
+    rng = np.random.default_rng(seed)
+
+    def draw() -> Iterator[Trial]:
+        for _ in range(n):
             d = float(rng.uniform(2.0, 5.0))
             y = float(rng.uniform(1.5, 2.5))
             x0 = float(rng.uniform(1.0, 9.0 - d))
             start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
             if rng.random() < 0.5:  # half of them the other way
                 start, goal = Pose2D(goal.x, y, math.pi), Pose2D(start.x, y, math.pi)
-            if only is not None and i not in only:
-                continue
-            stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
-            try:
-                out.trials.append(_run(stack, f"straight {i}", start, goal, timeout, on_trial))
-            finally:
-                stack.session.close()
+            yield Trial(start, goal)
 
-    return _timed(_label("straight", controller), run)
+    o = SetOptions(seed, on_trial, **kw)
+    return _run_set("straight", "straight", _box(10.0, 4.0), draw(), timeout, o)
 
 
 def turn_trials(
-    n: int = 50,
-    seed: int = 0,
-    timeout: float = 90.0,
-    on_trial: OnTrial | None = None,
-    *,
-    controller: str | None = None,
-    safety: bool = True,
-    only: frozenset[int] | None = None,
+    n: int = 50, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None, **kw
 ) -> SetResult:
     """No obstacle, with turns: from the far end of the L's horizontal leg round the corner to the
     vertical leg, facing along it (a left turn of 90 degrees plus the approach)."""
-    grid = _l_corridor()
     rng = np.random.default_rng(seed)
 
-    def run(out: SetResult) -> None:
-        for i in range(n):
+    def draw() -> Iterator[Trial]:
+        for _ in range(n):
             start = Pose2D(float(rng.uniform(5.0, 7.0)), float(rng.uniform(0.7, 1.3)), math.pi)
             goal = Pose2D(float(rng.uniform(0.7, 1.3)), float(rng.uniform(5.0, 7.0)), math.pi / 2)
-            if only is not None and i not in only:
-                continue
-            stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
-            try:
-                out.trials.append(_run(stack, f"turn {i}", start, goal, timeout, on_trial))
-            finally:
-                stack.session.close()
+            yield Trial(start, goal)
 
-    return _timed(_label("turns", controller), run)
+    return _run_set("turns", "turn", _l_corridor(), draw(), timeout, SetOptions(seed, on_trial, **kw))
 
 
 def fixed_obstacle_trials(
-    n: int = 50,
-    seed: int = 0,
-    timeout: float = 90.0,
-    on_trial: OnTrial | None = None,
-    *,
-    controller: str | None = None,
-    safety: bool = True,
-    only: frozenset[int] | None = None,
+    n: int = 50, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None, **kw
 ) -> SetResult:
     """A fixed obstacle the map does not have: a 30 x 30 cm box midway on the straight line."""
-    grid = _box(10.0, 4.0)
     rng = np.random.default_rng(seed)
 
-    def run(out: SetResult) -> None:
-        for i in range(n):
+    def draw() -> Iterator[Trial]:
+        for _ in range(n):
             y = float(rng.uniform(1.6, 2.4))
             x0 = float(rng.uniform(1.0, 2.0))
             d = float(rng.uniform(4.0, 6.0))
-            start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
             cx, cy = x0 + d / 2 + float(rng.uniform(-0.3, 0.3)), y + float(rng.uniform(-0.1, 0.1))
-            box = [
+            box = (
                 (cx - 0.15, cy - 0.15),
                 (cx + 0.15, cy - 0.15),
                 (cx + 0.15, cy + 0.15),
                 (cx - 0.15, cy + 0.15),
-            ]
-            if only is not None and i not in only:
-                continue
-            stack = _fresh(
-                grid, start, seed * 1000 + i, obstacles=[box], controller=controller, safety=safety
             )
-            try:
-                out.trials.append(_run(stack, f"obstacle {i}", start, goal, timeout, on_trial))
-            finally:
-                stack.session.close()
+            yield Trial(Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0), obstacles=(box,))
 
-    return _timed(_label("fixed obstacle", controller), run)
+    o = SetOptions(seed, on_trial, **kw)
+    return _run_set("fixed obstacle", "obstacle", _box(10.0, 4.0), draw(), timeout, o)
 
 
 def person_trials(
-    n: int = 50,
-    seed: int = 0,
-    timeout: float = 90.0,
-    on_trial: OnTrial | None = None,
-    *,
-    controller: str | None = None,
-    safety: bool = True,
-    only: frozenset[int] | None = None,
+    n: int = 50, seed: int = 0, timeout: float = 90.0, on_trial: OnTrial | None = None, **kw
 ) -> SetResult:
     """Source A's moving obstacle: a person waits 0.8-1.3 m beside the straight line, past its
     middle; when the robot comes within that offset + 0.3-0.6 m of them (so it always does, about
     0.8-1.2 m before passing) they step in ~0.3 m ahead of its front (leading its motion), stand
     2-4 s and step back. The robot must stop or go round, then reach
     the goal, without touching them."""
-    grid = _box(10.0, 4.0)
     rng = np.random.default_rng(seed)
 
-    def run(out: SetResult) -> None:
-        for i in range(n):
+    def draw() -> Iterator[Trial]:
+        for _ in range(n):
             y = float(rng.uniform(1.6, 2.4))
             x0 = float(rng.uniform(1.0, 2.0))
             d = float(rng.uniform(5.0, 7.0))
-            start, goal = Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0)
             side = 1.0 if y < 2.0 else -1.0  # the wider side of the room
             px = x0 + d * float(rng.uniform(0.4, 0.6))
             offset = float(rng.uniform(0.8, 1.3))
-            py = y + side * offset
             trigger = offset + float(rng.uniform(0.3, 0.6))
             dwell, speed = float(rng.uniform(2.0, 4.0)), float(rng.uniform(0.8, 1.2))
-            if only is not None and i not in only:
-                continue
-            stack = _fresh(grid, start, seed * 1000 + i, controller=controller, safety=safety)
-            stack.driver.people.add_step_in(
-                px,
-                py,
-                trigger_distance=trigger,
-                dwell=dwell,
-                speed=speed,
-            )
-            try:
-                out.trials.append(_run(stack, f"person {i}", start, goal, timeout, on_trial))
-            finally:
-                stack.session.close()
 
-    return _timed(_label("person steps in", controller), run)
+            def person(
+                stack: SimStack, px=px, py=y + side * offset, trigger=trigger, dwell=dwell, speed=speed
+            ):
+                stack.driver.people.add_step_in(px, py, trigger_distance=trigger, dwell=dwell, speed=speed)
+
+            yield Trial(Pose2D(x0, y, 0.0), Pose2D(x0 + d, y, 0.0), setup=person)
+
+    o = SetOptions(seed, on_trial, **kw)
+    return _run_set("person steps in", "person", _box(10.0, 4.0), draw(), timeout, o)
 
 
 GREENHOUSE_AISLES = (2.6, 4.4, 6.2, 8.0)
@@ -315,55 +310,35 @@ GREENHOUSE_AISLES = (2.6, 4.4, 6.2, 8.0)
 
 
 def greenhouse_row_trials(
-    n: int = 50,
-    seed: int = 0,
-    timeout: float = 120.0,
-    on_trial: OnTrial | None = None,
-    *,
-    controller: str | None = None,
-    safety: bool = True,
-    profile: str = "omni4",
-    only: frozenset[int] | None = None,
+    n: int = 50, seed: int = 0, timeout: float = 120.0, on_trial: OnTrial | None = None, **kw
 ) -> SetResult:
-    """Source C's row run: from one headland, down a whole aisle (15 m of rows), to the other
-    headland, past the aisle's unmapped mounds / puddles; aisle, direction and the exact start and
-    goal vary per trial. The scenario's workers are left out (people have their own set)."""
+    """Source C's row run (omni4 unless ``profile`` says otherwise): from one headland, down a whole
+    aisle (15 m of rows), to the other headland, past the aisle's unmapped mounds / puddles; aisle,
+    direction and the exact start and goal vary per trial. The scenario's workers are left out
+    (people have their own set)."""
     from maps.stock import stock_world_path
     from robot.sim.scenario import load_scenario, sidecar_path
 
     path = stock_world_path("greenhouse")
-    base = World.from_yaml(path)
-    grid = base.grid
     features = load_scenario(sidecar_path(path)).obstacles
     rng = np.random.default_rng(seed)
+    o = SetOptions(seed, on_trial, **{"profile": "omni4", **kw})
 
-    def run(out: SetResult) -> None:
+    def draw() -> Iterator[Trial]:
         for i in range(n):
             y = GREENHOUSE_AISLES[int(rng.integers(len(GREENHOUSE_AISLES)))] + float(rng.uniform(-0.1, 0.1))
             west, east = float(rng.uniform(1.0, 1.6)), float(rng.uniform(18.2, 18.6))
             start, goal = Pose2D(west, y, 0.0), Pose2D(east, y, 0.0)
             if rng.random() < 0.5:
                 start, goal = Pose2D(east, y, math.pi), Pose2D(west, y, math.pi)
-            if only is not None and i not in only:
-                continue
-            world = World.from_yaml(path, start_pose=start)
-            for f in features:
-                world.add_polygon(f.polygon, kind=f.kind)
-            stack = _fresh(
-                grid,
-                start,
-                seed * 1000 + i,
-                controller=controller,
-                safety=safety,
-                profile=profile,
-                world=world,
-            )
-            try:
-                out.trials.append(_run(stack, f"row {i}", start, goal, timeout, on_trial))
-            finally:
-                stack.session.close()
+            world = None
+            if o.only is None or i in o.only:  # loading a world is not free: only for driven trials
+                world = World.from_yaml(path, start_pose=start)
+                for f in features:
+                    world.add_polygon(f.polygon, kind=f.kind)
+            yield Trial(start, goal, world=world)
 
-    return _timed(_label("greenhouse rows", controller), run)
+    return _run_set("greenhouse rows", "row", World.from_yaml(path).grid, draw(), timeout, o)
 
 
 def _free_poses(stack: SimStack, clearance: float, rng: np.random.Generator, k: int) -> np.ndarray:
