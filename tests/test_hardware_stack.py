@@ -7,9 +7,9 @@ assertions (link loss within ~0.3 s + one control period) carry scheduling slack
 
 from __future__ import annotations
 
-import contextlib
 import importlib
 import json
+import pkgutil
 import subprocess
 import sys
 import time
@@ -34,13 +34,15 @@ from robot.serial.pty import PtyPort
 PROFILE = load_profile("skid4")
 ROOT = Path(__file__).resolve().parent.parent
 
-# The server imports some modules only as it starts (the navigation feature pulls in scipy.optimize
-# through TEB). An import holds the GIL for up to ~0.6 s on a loaded machine and freezes the
+# The server imports most of its modules only as it starts (features and routes are discovered, the
+# navigation feature pulls in scipy.optimize through TEB); on a fresh clone each is also compiled to
+# bytecode first. An import holds the GIL for up to ~0.6 s on a loaded machine and freezes the
 # in-process emulators with the server: the base looks silent (LOST) or its 200 ms watchdog fires, an
-# artefact of sharing one process that a real MCU does not have. Import them before any emulator runs.
-for _module in ("nav.navigator", "nav.control.teb"):
-    with contextlib.suppress(ImportError):
-        importlib.import_module(_module)
+# artefact of sharing one process that a real MCU does not have. Import everything before any
+# emulator runs.
+for _package in ("app", "nav", "robot"):
+    for _module in pkgutil.walk_packages(importlib.import_module(_package).__path__, f"{_package}."):
+        importlib.import_module(_module.name)
 SLACK = 0.4  # s of scheduling slack on timing bounds: these tests run on wall time on loaded machines
 
 
@@ -105,7 +107,7 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         assert hello(ws)["driving"] is True
         drive(ws, 1.2, vx=0.2)
-        assert session.modes.mode.value == "teleop"
+        assert session.modes.mode.value == "teleop", session.fault
         assert session.fault is None, session.fault
         # odometry from the serial encoder counts follows the emulated robot's true motion
         moved_truth = pair.pump.truth_pose.distance_to(truth0)
