@@ -1,14 +1,13 @@
 """AMCL benchmarks, and the synthetic scenarios (trajectories, noisy odometry, ray-cast scans on a
 stock map) that both these benchmarks and ``tests/test_amcl_*.py`` localize in.
 
-Maps come from ``shared/datasets/ros_maps`` (beside the repository): Willow Garage's office floor
+Maps come from the shared ``datasets/ros_maps`` (``bench.datasets`` says where): Willow Garage's office floor
 (``navigation_stage/willow-full``, 0.1 m cells) is the "office-like" map.
 """
 
 from __future__ import annotations
 
 import math
-import os
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -16,12 +15,9 @@ from pathlib import Path
 import numpy as np
 
 from bench.core import Benchmark, Figure
+from bench.datasets import ROS_MAPS
 from nav.types import GridGeometry, LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
-ROS_MAPS = (
-    Path(os.environ.get("NAVDECK_DATASETS", Path(__file__).resolve().parents[2] / "shared" / "datasets"))
-    / "ros_maps"
-)
 WILLOW = ROS_MAPS / "navigation_stage" / "willow-full.yaml"
 # A room-and-corridor part of Willow (metres, map frame) small enough for global localization
 # with Nav2's default 2000 particles: the "office-like" map.

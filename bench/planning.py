@@ -17,12 +17,12 @@ from pathlib import Path as FsPath
 import numpy as np
 
 from bench.core import Benchmark, Figure
+from bench.datasets import ROS_MAPS
 from nav.costmap import Costmap2D, CostmapOptions, inflate, local_costmap_options
 from nav.planning import AStarPlanner, DijkstraPlanner, GridPlanner, PlannerOptions, nearest_free_pose
 from nav.types import Costmap, GridGeometry, OccupancyGrid, Pose2D
 
 RES = 0.05
-ROS_MAPS = FsPath("/work/shared/datasets/ros_maps")
 WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
 TB3_SANDBOX = ROS_MAPS / "nav2_bringup/tb3_sandbox.yaml"  # Nav2's own sandbox, 384 x 384 at 0.05 m
 WAREHOUSE = ROS_MAPS / "nav2_bringup/warehouse.yaml"  # Nav2's warehouse, 1006 x 1674 at 0.03 m

@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 
 from bench.core import Benchmark, Figure
+from bench.datasets import SLAM_BENCHMARK
 
-DATA = Path("/work/shared/datasets/slam_benchmark_2d")
+DATA = SLAM_BENCHMARK
 # published GMapping numbers (Kümmerle et al. 2009) and our targets
 TARGETS = {"intel": (0.05, 1.5), "aces": (0.060, None), "fr079": (0.061, None)}
 

@@ -12,6 +12,7 @@ from app.bus import Snapshot, SnapshotBus
 from app.viewer.demo import office_map
 from app.viewer.scene import Viewer
 from bench.core import Benchmark, Figure
+from bench.datasets import ROS_MAPS
 from nav.types import GridGeometry, LaserScan, OccupancyGrid, Pose2D, Twist2D
 
 
@@ -87,7 +88,7 @@ def bench_map_tiles() -> list[Figure]:
     ]
 
 
-WILLOW = pathlib.Path("/work/shared/datasets/ros_maps/navigation_stage/willow-full-0.05.pgm")
+WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.pgm"
 
 
 def _read_trinary_pgm(path: pathlib.Path, resolution: float = 0.05) -> OccupancyGrid:

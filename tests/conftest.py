@@ -10,7 +10,6 @@ import pytest
 from app.embedded import EmbeddedServer, serve_in_thread
 
 ROOT = Path(__file__).resolve().parent.parent
-SHARED = ROOT.parent / "shared"
 ARTIFACTS = ROOT / "test-artifacts"
 
 

@@ -259,14 +259,14 @@ def test_with_the_project_astar_planner() -> None:
 def test_turtlebot3_world_round_trip_on_the_real_map() -> None:
     """Nav2's TurtleBot3 world map (a real SLAM map, nine pillars in a hexagon): the skid4 robot
     with its profile's limits visits four waypoints between the pillars and comes back."""
-    from pathlib import Path as FsPath
-
+    from bench.datasets import TB3_MAP
     from maps.mapio import load_map_yaml
     from nav.types import NO_INFORMATION
     from robot.profiles import load_profile
 
-    shared = FsPath(__file__).resolve().parents[2] / "shared"
-    grid = load_map_yaml(shared / "datasets/ros_maps/turtlebot3_navigation2/map.yaml")
+    if not TB3_MAP.exists():
+        pytest.skip(f"TurtleBot3 map not found at {TB3_MAP}")
+    grid = load_map_yaml(TB3_MAP)
     occ = grid.occupied_mask()
     cm = inflate(occ, inscribed=0.1)
     cm.costs[grid.data < 0] = NO_INFORMATION

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from conftest import make_settings
 
+from bench.datasets import ROS_MAPS
 from maps.mapio import load_map_yaml
 
-ROS_MAPS = Path("/work/shared/datasets/ros_maps")
 UPSTREAM = sorted(ROS_MAPS.glob("*/*.yaml")) if ROS_MAPS.is_dir() else []
 needs_maps = pytest.mark.skipif(not UPSTREAM, reason="ros_maps dataset not present")
 TB3 = ROS_MAPS / "turtlebot3_navigation2/map.yaml"

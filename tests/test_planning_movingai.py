@@ -1,5 +1,5 @@
 """A* and Dijkstra reproduce the Moving AI benchmark optimal lengths (Sturtevant 2012): 8-connected,
-diagonal sqrt2, no cutting past a blocked corner. See /work/shared/datasets/movingai/SOURCE.md."""
+diagonal sqrt2, no cutting past a blocked corner. See datasets/movingai/SOURCE.md in the shared folder."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ from pathlib import Path as FsPath
 import numpy as np
 import pytest
 
+from bench.datasets import MOVINGAI
 from nav.planning import AStarPlanner, DijkstraPlanner, PlannerOptions
 from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, Pose2D
 
-ROOT = FsPath("/work/shared/datasets/movingai/mapf")
+ROOT = MOVINGAI / "mapf"
 MAPS = [
     "random-32-32-10",
     "maze-32-32-2",

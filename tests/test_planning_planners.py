@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path as FsPath
 
 import numpy as np
 import pytest
 
+from bench.datasets import ROS_MAPS
 from nav.costmap import Costmap2D, CostmapOptions
 from nav.planning import (
     AStarPlanner,
@@ -36,7 +36,7 @@ from nav.types import (
 
 RES = 0.05
 PLANNERS = [AStarPlanner, DijkstraPlanner]
-WILLOW = FsPath("/work/shared/datasets/ros_maps/navigation_stage/willow-full-0.05.yaml")
+WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
 
 
 def room(w: int = 120, h: int = 80) -> Costmap:

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.datasets import ROS_MAPS
 from maps.mapio import (
     MapFormatError,
     encode_pgm,
@@ -18,7 +19,6 @@ from maps.mapio import (
 )
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 
-ROS_MAPS = Path("/work/shared/datasets/ros_maps")
 YAMLS = sorted(ROS_MAPS.glob("*/*.yaml"))
 pytestmark = pytest.mark.skipif(not YAMLS, reason="ros_maps dataset not present")
 

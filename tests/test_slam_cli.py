@@ -10,9 +10,10 @@ import numpy as np
 import pytest
 
 from app.cli import main
+from bench.datasets import SLAM_BENCHMARK
 from nav.slam.metric import parse_relations, score_trajectory
 
-INTEL = Path("/work/shared/datasets/slam_benchmark_2d/bags/intel.orig.bag")
+INTEL = SLAM_BENCHMARK / "bags/intel.orig.bag"
 
 
 @pytest.mark.skipif(not INTEL.exists(), reason="Intel benchmark log not available")

@@ -8,11 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bench.datasets import SLAM_BENCHMARK
 from robot.logs import LogError, Stamp, read_log
 from robot.logs.reader import interpolate_poses, load_log
 
-INTEL = Path("/work/shared/datasets/slam_benchmark_2d/bags/intel.orig.bag")
-RELATIONS = Path("/work/shared/datasets/slam_benchmark_2d/relations/intel.relations")
+INTEL = SLAM_BENCHMARK / "bags/intel.orig.bag"
+RELATIONS = SLAM_BENCHMARK / "relations/intel.relations"
 
 
 def _flaser(n: int, t: str, odom: tuple[float, float, float], r: float = 2.0) -> str:

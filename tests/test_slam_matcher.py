@@ -3,18 +3,18 @@
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 import pytest
 
+from bench.datasets import SLAM_BENCHMARK
 from nav.grid import LogOddsOptions
 from nav.slam.matcher import RefineOptions, ScanMatchError, SearchWindow, correlative_search, match_scan
 from nav.slam.submap import Submap
 from nav.slam.synthetic import box_world, cast_scan
 from nav.types import Pose2D
 
-INTEL = Path("/work/shared/datasets/slam_benchmark_2d/bags/intel.orig.bag")
+INTEL = SLAM_BENCHMARK / "bags/intel.orig.bag"
 REFINE = RefineOptions(translation_weight=0.5, rotation_weight=2.0)
 
 
