@@ -8,8 +8,10 @@ nothing in a tick waits on the database, the planner, the viewer or a client.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
+import os
 import sys
 import threading
 import time
@@ -59,6 +61,11 @@ class SessionOptions:
     trail_length: int = 2000  # poses kept for the odometry trail
     trail_min_step: float = 0.02  # m between trail points
     faults: FaultMonitorOptions = field(default_factory=FaultMonitorOptions)  # garbage/slip/imu/overrun
+    # Nice value asked for the control-loop thread (Linux, per thread). Below 0 needs root or
+    # CAP_SYS_NICE (systemd: AmbientCapabilities=CAP_SYS_NICE); without it the thread keeps the
+    # process's. It lets the loop's wake-up preempt the web server's threads and the other
+    # processes on a small robot computer, as a ROS 2 controller's real-time thread would.
+    loop_nice: int = -10
 
 
 @dataclass
@@ -76,6 +83,7 @@ class LoopStats:
     duration_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
     overruns: int = 0
     ticks: int = 0
+    nice: int | None = None  # the control thread's nice value (None: not known)
 
     def summary(self) -> dict[str, float]:
         late = np.fromiter(tuple(self.lateness_ms), float)
@@ -85,6 +93,7 @@ class LoopStats:
         return {
             "ticks": self.ticks,
             "overruns": self.overruns,
+            **({"nice": self.nice} if self.nice is not None else {}),
             "lateness_p50_ms": float(np.percentile(late, 50)),
             "lateness_p99_ms": float(np.percentile(late, 99)),
             "tick_p50_ms": float(np.percentile(dur, 50)),
@@ -148,7 +157,10 @@ class Session:
         self.safety: SafetyFilter | None = None
         self._last_frame: SensorFrame | None = None
         self.safety_stop: str | None = None
-        self.workers = ThreadPoolExecutor(max_workers=2, thread_name_prefix="worker")
+        # Workers are started from the loop thread: back to the process's priority, not the loop's.
+        self.workers = ThreadPoolExecutor(
+            max_workers=2, thread_name_prefix="worker", initializer=_process_priority_for_this_thread
+        )
         self._reset_driver = False
         self._wake = threading.Event()
         # Reflex path: a teleop command is written at once, not at the next tick. From the caller's
@@ -235,6 +247,8 @@ class Session:
             self.driver.close()
 
     def _run(self) -> None:
+        if not self.clock.is_virtual:
+            self.stats.nice = _prioritize_this_thread(self.options.loop_nice)
         next_t = self.clock.now()
         prev_start: float | None = None
         while not self._stop.is_set():
@@ -500,3 +514,23 @@ class Session:
             self.add_event("estop", reason=reason)
         if new == Mode.FAULT:
             self.add_event("fault", reason=reason)
+
+
+def _prioritize_this_thread(nice: int) -> int | None:
+    """Ask for ``nice`` on the calling thread; return the value it has (None off Linux)."""
+    if not hasattr(os, "setpriority"):
+        return None
+    tid = threading.get_native_id()
+    try:
+        os.setpriority(os.PRIO_PROCESS, tid, nice)
+    except OSError as exc:  # unprivileged: a thread may only lower its own priority
+        log.info("control loop keeps its priority (nice %d refused: %s)", nice, exc.strerror)
+    return os.getpriority(os.PRIO_PROCESS, tid)
+
+
+def _process_priority_for_this_thread() -> None:
+    """Give the calling thread the process's nice value (threads inherit their creator's)."""
+    if hasattr(os, "setpriority"):
+        with contextlib.suppress(OSError):
+            process_nice = os.getpriority(os.PRIO_PROCESS, os.getpid())  # the main thread's
+            os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), process_nice)

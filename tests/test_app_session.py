@@ -86,3 +86,44 @@ def test_lidar_silence_faults_and_stops() -> None:
     s.driver.lidar_enabled = True
     s.run_for(0.5)
     assert s.reset() == Mode.IDLE
+
+
+def test_real_time_loop_thread_asks_for_priority_and_workers_do_not_keep_it() -> None:
+    """On a real clock the loop thread asks for ``loop_nice`` (granted to root / CAP_SYS_NICE) and
+    the worker threads it starts go back to the process's nice value."""
+    import os
+    import threading
+    import time
+
+    from app.session import SessionOptions, _prioritize_this_thread
+    from robot.clock import RealClock
+
+    clock = RealClock()
+    w = World.stock("apartment")
+    driver = SimDriver(w, load_profile("skid4"), clock, seed=1, start_pose=w.start_pose)
+    s = Session(
+        driver, clock=clock, grid=w.grid, start_pose=w.start_pose, options=SessionOptions(loop_nice=-5)
+    )
+    process_nice = os.getpriority(os.PRIO_PROCESS, os.getpid())
+    s.start()
+    try:
+        deadline = time.monotonic() + 5.0
+        while s.stats.nice is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        privileged = os.geteuid() == 0
+        assert s.stats.nice == (-5 if privileged else process_nice)
+        # a worker thread is created by the thread that first submits: do that from a prioritized one
+        futures = []
+
+        def submit_from_prioritized_thread() -> None:
+            _prioritize_this_thread(-5)
+            futures.append(
+                s.workers.submit(lambda: os.getpriority(os.PRIO_PROCESS, threading.get_native_id()))
+            )
+
+        t = threading.Thread(target=submit_from_prioritized_thread)
+        t.start()
+        t.join()
+        assert futures[0].result(timeout=5.0) == process_nice
+    finally:
+        s.close()
