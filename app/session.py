@@ -81,6 +81,7 @@ class LoopStats:
 
     lateness_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
     duration_ms: deque = field(default_factory=lambda: deque(maxlen=2000))
+    period_ms: deque = field(default_factory=lambda: deque(maxlen=2000))  # start to start
     overruns: int = 0
     ticks: int = 0
     nice: int | None = None  # the control thread's nice value (None: not known)
@@ -96,9 +97,17 @@ class LoopStats:
             **({"nice": self.nice} if self.nice is not None else {}),
             "lateness_p50_ms": float(np.percentile(late, 50)),
             "lateness_p99_ms": float(np.percentile(late, 99)),
+            **self._period_summary(),
             "tick_p50_ms": float(np.percentile(dur, 50)),
             "tick_p99_ms": float(np.percentile(dur, 99)),
         }
+
+    def _period_summary(self) -> dict[str, float]:
+        period = np.fromiter(tuple(self.period_ms), float)
+        if period.size == 0:
+            return {}
+        p50, p99 = np.percentile(period, [50, 99])
+        return {"period_p50_ms": float(p50), "period_p99_ms": float(p99)}
 
 
 class Session:
@@ -255,6 +264,7 @@ class Session:
             start = self.clock.now()
             self.stats.lateness_ms.append(max(0.0, (start - next_t) * 1e3))
             if prev_start is not None:
+                self.stats.period_ms.append((start - prev_start) * 1e3)
                 overrun = self.fault_monitor.check_period(start - prev_start)
                 if overrun is not None and self.fault is None:
                     self._enter_fault(overrun)  # this tick's command is then the stop

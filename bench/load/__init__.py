@@ -23,6 +23,7 @@ def _figures(report, *, soak: bool) -> list[Figure]:
     figs = [
         Figure(f"loop lateness p99 ({r.viewers} viewers)", p99, "ms", "< 10 ms", p99 < 10),
         Figure("loop lateness p50", r.lateness_p50_ms, "ms"),
+        Figure("loop period p99 (schedule 50 ms)", r.period_p99_ms, "ms", "< 60 ms", r.period_p99_ms < 60),
         Figure("tick duration p99", r.tick_p99_ms, "ms"),
         Figure("telemetry rate, slowest viewer", r.min_rate, "Hz", ">= 9 Hz", r.min_rate >= 9.0),
         Figure("REST poll latency p99", r.poll_latency_p99_ms, "ms"),

@@ -56,6 +56,7 @@ class LoadReport:
     poll_latency_p99_ms: float
     lateness_p50_ms: float
     lateness_p99_ms: float
+    period_p99_ms: float  # start-to-start interval of ticks: the "period over the 20 Hz period"
     tick_p99_ms: float
     overruns: int
     cpu_pct: float  # of one core, server process, during the measured window
@@ -95,6 +96,7 @@ class LoadReport:
             "poll_latency_p99_ms": round(self.poll_latency_p99_ms, 1),
             "loop_lateness_p50_ms": round(self.lateness_p50_ms, 2),
             "loop_lateness_p99_ms": round(self.lateness_p99_ms, 2),
+            "loop_period_p99_ms": round(self.period_p99_ms, 2),
             "tick_p99_ms": round(self.tick_p99_ms, 2),
             "overruns": self.overruns,
             "server_cpu_pct": round(self.cpu_pct, 1),
@@ -261,6 +263,7 @@ async def _drive_load(server: ServerProcess, opts: LoadOptions, progress=None) -
         poll_latency_p99_ms=lat_sorted[int(0.99 * (len(lat_sorted) - 1))] if lat_sorted else float("nan"),
         lateness_p50_ms=health.get("lateness_p50_ms", float("nan")),
         lateness_p99_ms=health.get("lateness_p99_ms", float("nan")),
+        period_p99_ms=health.get("period_p99_ms", float("nan")),
         tick_p99_ms=health.get("tick_p99_ms", float("nan")),
         overruns=int(health.get("overruns", 0)),
         cpu_pct=cpu,
