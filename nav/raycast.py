@@ -6,12 +6,12 @@ the expected range ``z*`` of each beam) and by costmap free-space clearing.
 Method (Amanatides & Woo 1987, "A fast voxel traversal algorithm", vectorized): each ray is walked
 along its *major* axis, the one it advances fastest on. With ``|slope| <= 1`` a ray touches at most
 two cells per column it crosses: the one it enters through the column boundary and the one it
-enters through a row boundary inside the column. Both entry parameters are closed-form, so all
-columns of all rays are generated as one (rays, columns) array, looked up in a padded occupancy
-table, and the range is the smallest entry parameter of an occupied cell (no sorting: only the
-minimum matters). Columns are marched in growing windows and rays that hit drop out, so the cost
-follows the distance to the nearest wall rather than ``max_range``. The result is the exact distance
-to the boundary of the first occupied cell, equal to a brute-force ray/box test.
+enters through a row boundary inside the column. Both entry parameters are closed-form; a compiled
+loop (``_march``) walks each ray's columns in a padded occupancy table and stops at the first
+column with an occupied cell, so the cost follows the distance to the nearest wall rather than
+``max_range``. (It replaced a numpy version that built (rays, columns) arrays in growing windows:
+the same arithmetic, 7-15x slower.) The result is the exact distance to the boundary of the first
+occupied cell, equal to a brute-force ray/box test.
 """
 
 from __future__ import annotations
@@ -19,13 +19,9 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from nav.types import GridGeometry
-
-# Rays are processed in chunks so that (rays x crossings) temporaries stay around a few MB.
-_CHUNK_ELEMENTS = 1 << 20
-# Columns in the first marching window (doubles each round).
-_FIRST_WINDOW = 32
 
 
 def _to_local(geometry: GridGeometry, origins: np.ndarray) -> np.ndarray:
@@ -38,14 +34,73 @@ def _to_local(geometry: GridGeometry, origins: np.ndarray) -> np.ndarray:
     return local / geometry.resolution
 
 
+@njit(cache=True, nogil=True)
+def _march(
+    flat: np.ndarray,
+    n: int,
+    stride: int,
+    u0: np.ndarray,
+    v0: np.ndarray,
+    du: np.ndarray,
+    dv: np.ndarray,
+    t_max: float,
+    t_start: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """Per ray (cell units, grid-local): the entry distance of the first occupied cell, or inf.
+    The major-axis walk of the module doc, one column at a time from the column holding the point
+    at ``t_start``, stopping at the first column with a hit (later columns are entered later) or
+    once columns are entered beyond ``t_max``."""
+    hi = float(n + 1)
+    for i in range(u0.shape[0]):
+        swap = abs(dv[i]) > abs(du[i])  # major axis is v (rows)
+        # coordinates shifted by +1 cell into the padded table
+        a0 = (v0[i] if swap else u0[i]) + 1.0
+        b0 = (u0[i] if swap else v0[i]) + 1.0
+        da = dv[i] if swap else du[i]
+        db = du[i] if swap else dv[i]
+        if db == 0.0:
+            db = 1e-300  # a ray along the axis never crosses a minor boundary
+        ada = abs(da)  # >= 1/sqrt(2)
+        fa = math.floor(a0)
+        frac = a0 - fa
+        gap = frac if da > 0 else 1.0 - frac  # major distance to the first column boundary
+        k_first = math.floor(min(t_start[i], t_max) * ada + gap)
+        sgn = 1.0 if da > 0 else (-1.0 if da < 0 else 0.0)
+        slope, inv_a, inv_b = db / ada, 1.0 / ada, 1.0 / db
+        off = (1.0 if db < 0 else 0.0) - b0
+        s_major = float(stride) if swap else 1.0
+        s_minor = 1.0 if swap else float(stride)
+        n_cols = math.ceil(t_max * ada) + 2
+        best = np.inf
+        # major distance travelled on entering column k (k = 0: the start) and the minor cell there
+        m = max(k_first - gap, 0.0)
+        fb_in = math.floor(b0 + slope * m)
+        for kk in range(n_cols):
+            k = k_first + kk
+            t_in = m * inv_a
+            if t_in > t_max or t_in > best:
+                break
+            m_next = max(k + 1.0 - gap, 0.0)
+            fb_out = math.floor(b0 + slope * m_next)
+            base = min(max(fa + sgn * k, 0.0), hi) * s_major
+            if flat[int(min(max(fb_in, 0.0), hi) * s_minor + base)]:
+                best = min(best, t_in)
+            # entering the second cell of the column through a minor boundary; when there is no
+            # second cell this is the same cell, and max() keeps its time no earlier than t_in
+            if flat[int(min(max(fb_out, 0.0), hi) * s_minor + base)]:
+                best = min(best, max((fb_out + off) * inv_b, t_in))
+            m, fb_in = m_next, fb_out
+        out[i] = best if best <= t_max else np.inf
+
+
 class RayCaster:
     """Casts many rays on one static occupancy mask (the padded lookup table is built once).
 
     Each ray is walked along its *major* axis (the one it advances fastest on): in every column
     (or row) it crosses, a ray with ``|slope| <= 1`` touches at most two cells, the one it enters
     through the column boundary and the one it enters through a minor-axis boundary inside the
-    column. All columns of all rays are generated as one (rays, columns) array, so a 360-beam scan
-    is about thirty numpy operations on ~40 k elements and no Python loop.
+    column. A 360-beam scan is a few numpy operations to set the rays up and one compiled walk.
     """
 
     def __init__(
@@ -124,12 +179,8 @@ class RayCaster:
         v0 = np.repeat(local[:, 1], b)
         t_max = float(max_range) / g.resolution
         t_start = np.repeat(self._start_distance(local), b)
-        per_ray = 2 * (math.ceil(t_max) + 3)
-        chunk = max(1, _CHUNK_ELEMENTS // per_ray)
         out = np.empty(u0.size)
-        for s in range(0, u0.size, chunk):
-            e = s + chunk
-            out[s:e] = self._cast_chunk(u0[s:e], v0[s:e], du[s:e], dv[s:e], t_max, t_start[s:e])
+        _march(self._flat, self._n, self._stride, u0, v0, du, dv, t_max, t_start, out)
         out *= g.resolution
         return out.reshape(p, b)
 
@@ -145,76 +196,6 @@ class RayCaster:
         inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
         out[inside] = np.maximum(self._clearance[rows[inside], cols[inside]] - math.sqrt(2.0) - 1e-6, 0.0)
         return np.minimum(out, 1e9)
-
-    def _cast_chunk(
-        self,
-        u0: np.ndarray,
-        v0: np.ndarray,
-        du: np.ndarray,
-        dv: np.ndarray,
-        t_max: float,
-        t_start: np.ndarray,
-    ) -> np.ndarray:
-        swap = np.abs(dv) > np.abs(du)  # major axis is v (rows)
-        # coordinates shifted by +1 cell into the padded table
-        a0, b0 = np.where(swap, v0, u0) + 1.0, np.where(swap, u0, v0) + 1.0
-        da, db = np.where(swap, dv, du), np.where(swap, du, dv)
-        db = np.where(db == 0.0, 1e-300, db)  # a ray along the axis never crosses a minor boundary
-        ada = np.abs(da)  # >= 1/sqrt(2)
-        fa = np.floor(a0)
-        frac = a0 - fa
-        gap = np.where(da > 0, frac, 1.0 - frac)  # major distance to the first column boundary
-        # first column that can hold a hit: the one containing the point at t_start
-        k_first = np.floor(np.minimum(t_start, t_max) * ada + gap)
-        rays = {
-            "gap": gap,
-            "k_first": k_first,
-            "fa": fa,
-            "sgn": np.sign(da),
-            "b0": b0,
-            "slope": db / ada,
-            "inv_a": 1.0 / ada,
-            "inv_b": 1.0 / db,
-            "off": (db < 0) - b0,
-            "s_major": np.where(swap, self._stride, 1).astype(np.float64),
-            "s_minor": np.where(swap, 1, self._stride).astype(np.float64),
-        }
-        n_total = math.ceil(t_max * float(ada.max())) + 2
-        out = np.full(u0.size, np.inf)
-        idx = np.arange(u0.size)
-        k0, width = 0, _FIRST_WINDOW
-        # March in growing windows of columns; rays that hit leave the active set, so the cost
-        # follows the distance to the nearest wall rather than max_range.
-        while idx.size and k0 < n_total:
-            k1 = min(k0 + width, n_total)
-            sub = rays if idx.size == u0.size else {key: v[idx] for key, v in rays.items()}
-            t = self._window(sub, k0, k1)
-            out[idx] = t
-            alive = ~np.isfinite(t) & ((sub["k_first"] + k1 - sub["gap"]) * sub["inv_a"] <= t_max)
-            idx = idx[alive]
-            k0, width = k1, width * 2
-        out[out > t_max] = np.inf
-        return out
-
-    def _window(self, r: dict[str, np.ndarray], k0: int, k1: int) -> np.ndarray:
-        """Nearest hit among columns k_first + (k0..k1-1) of each ray (inf if none)."""
-        k = r["k_first"][:, None] + np.arange(k0, k1 + 1, dtype=np.float64)
-        n = k1 - k0
-        # major distance travelled on entering column k (k = 0: the start) and the minor cell there
-        m = np.maximum(k - r["gap"][:, None], 0.0)
-        fb = np.floor(r["b0"][:, None] + r["slope"][:, None] * m)
-        fb_in, fb_out = fb[:, :n], fb[:, 1:]
-        t_in = m[:, :n] * r["inv_a"][:, None]
-        # entering the second cell of the column through a minor boundary; when there is no second
-        # cell this is the same cell, and max() keeps its time no earlier than t_in
-        t_mid = np.maximum((fb_out + r["off"][:, None]) * r["inv_b"][:, None], t_in)
-        hi = float(self._n + 1)
-        base = np.clip(r["fa"][:, None] + r["sgn"][:, None] * k[:, :n], 0.0, hi) * r["s_major"][:, None]
-        # both candidate cells of every column in one (R, 2n) block: one lookup, one reduction
-        minor = np.clip(np.concatenate((fb_in, fb_out), axis=1), 0.0, hi) * r["s_minor"][:, None]
-        idx = (minor + np.concatenate((base, base), axis=1)).astype(np.intp)
-        t = np.concatenate((t_in, t_mid), axis=1)
-        return np.where(self._flat.take(idx), t, np.inf).min(axis=1)
 
 
 def cast_rays(

@@ -28,7 +28,7 @@ from nav.control import (
 )
 from nav.control.critics import Oscillation
 from nav.control.footprint import CostWindow, FootprintModel
-from nav.control.geometry import polyline_distance, project_onto_polyline
+from nav.control.geometry import polyline_distance, project_onto_polyline, project_poses
 from nav.control.trajectory import sample_twists, simulate_arcs, time_steps, window_1d
 from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
 
@@ -395,6 +395,70 @@ def test_path_projection_is_exact_and_extends_behind_the_start() -> None:
     assert np.allclose(s, [0.5, 1.5, -0.5, 2.0])
     assert np.allclose(d, [0.2, 0.3, math.hypot(0.5, 0.1), math.hypot(1.0, 1.0)])
     assert np.array_equal(polyline_distance(pts, poly), d)
+
+
+def test_path_projection_skips_only_segments_that_cannot_be_nearest() -> None:
+    # a long winding path and points near its start: the kernel skips far segments; a brute force
+    # over every segment must agree (distances, the extended-first-segment distance, arc length)
+    rng = np.random.default_rng(11)
+    t = np.linspace(0.0, 6.0, 120)
+    poly = np.column_stack((t, 0.6 * np.sin(1.3 * t)))
+    poses = np.column_stack(
+        (rng.uniform(-0.6, 0.8, 300), rng.uniform(-0.5, 0.5, 300), rng.uniform(-4, 4, 300))
+    )
+    for forward in (0.0, 0.1):
+        pts = poses[:, :2] + forward * np.column_stack((np.cos(poses[:, 2]), np.sin(poses[:, 2])))
+        d, d_ext, s = project_poses(poses, forward, poly)
+        a, ab = poly[:-1], np.diff(poly, axis=0)
+        rel = pts[:, None, :] - a[None]
+        tt = (rel * ab).sum(-1) / (ab * ab).sum(-1)
+        tc = np.clip(tt, 0.0, 1.0)
+        seg_d = np.hypot(*(tc[..., None] * ab - rel).transpose(2, 0, 1))
+        te = tc.copy()
+        te[:, 0] = np.minimum(tt[:, 0], 1.0)  # the first segment extends backwards
+        ext_d = np.hypot(*(te[..., None] * ab - rel).transpose(2, 0, 1))
+        j = np.argmin(ext_d, axis=1)
+        s0 = np.concatenate(([0.0], np.cumsum(np.hypot(ab[:, 0], ab[:, 1]))))
+        np.testing.assert_allclose(d, seg_d.min(axis=1), atol=1e-12)
+        np.testing.assert_allclose(d_ext, ext_d.min(axis=1), atol=1e-12)
+        np.testing.assert_allclose(
+            s, s0[j] + te[np.arange(len(j)), j] * np.hypot(ab[j, 0], ab[j, 1]), atol=1e-9
+        )
+
+
+def test_arcs_of_shared_turn_rates_equal_arcs_one_at_a_time() -> None:
+    # the kernel reuses sin/cos per distinct w: bit-identical to simulating each twist alone
+    vx, wz = np.meshgrid(np.linspace(-0.15, 0.26, 7), np.array([-1.0, -0.3, 0.0, 1e-10, 0.3, 1.0]))
+    tw = np.column_stack((vx.ravel(), np.zeros(vx.size), wz.ravel()))[::-1]
+    times = np.linspace(0.0, 1.7, 14)
+    start = Pose2D(0.3, -1.2, 2.5)
+    together = simulate_arcs(start, tw, times)
+    alone = np.concatenate([simulate_arcs(start, tw[k : k + 1], times) for k in range(len(tw))])
+    assert np.array_equal(together, alone)
+
+
+def test_near_lethal_mask_and_gather_equal_the_distance_transform_test() -> None:
+    rng = np.random.default_rng(4)
+    poly = np.asarray(SKID_FOOTPRINT)
+    model = FootprintModel.build(poly, RES, 16, round_robot=False)
+    for trial in range(20):
+        h, w = rng.integers(15, 50, 2)
+        costs = rng.integers(0, 200, (h, w)).astype(np.uint8)
+        costs[rng.random((h, w)) < rng.uniform(0.0, 0.1)] = 254
+        theta = 0.0 if trial % 2 else 0.4  # rotated grids take the numpy path
+        cm = Costmap(GridGeometry(RES, int(w), int(h), Pose2D(-0.3, 0.2, theta)), costs)
+        local = rng.uniform(0.25, 0.75, (30, 6, 2)) * np.array([w, h]) * RES
+        xy = cm.geometry.origin.transform_points(local.reshape(-1, 2)).reshape(local.shape)
+        poses = np.concatenate((xy, rng.uniform(-4, 4, (30, 6, 1))), axis=-1)
+        window = CostWindow.around(cm, poses, 0.2, unknown_is_lethal=False)
+        for reach in (0.1, model.circumscribed + 0.75 * RES, 0.4):
+            assert np.array_equal(window.near_lethal(reach), window.lethal_distance() <= reach)
+        # reference: gather every pose, no pre-filter
+        rows, cols = window.cells(poses)
+        full = window._gather(rows.ravel(), cols.ravel(), poses[..., 2].ravel(), model).reshape(rows.shape)
+        assert np.array_equal(window.footprint_lethal(poses, model), full >= 254)
+        assert np.array_equal(window.footprint_costs(poses, model), full)
+        assert np.array_equal(window.footprint_lethal(poses[:, 1:], model), full[:, 1:] >= 254)
 
 
 def test_footprint_step_spaces_poses_by_the_footprint_sweep() -> None:

@@ -280,3 +280,59 @@ def test_update_from_scan_uses_laser_pose_and_no_return_beams() -> None:
     assert at(-2.5, 0.0) == 0  # no return: cleared to 3 m
     assert at(-3.2, 0.0) == NO_INFORMATION
     assert at(0.0, -1.0) == NO_INFORMATION  # NaN beam ignored
+
+
+def test_compiled_obstacle_update_equals_the_numpy_path() -> None:
+    from nav.costmap.obstacle_layer import ObstacleLayer
+
+    rng = np.random.default_rng(9)
+    geo = GridGeometry(RES, 70, 60, Pose2D(-1.05, 0.35, 0.0))
+    for opts in (
+        ObstacleLayerOptions(),
+        ObstacleLayerOptions(raytrace_min_range=0.2, obstacle_min_range=0.3),
+    ):
+        a, b = ObstacleLayer(geo, opts, True), ObstacleLayer(geo, opts, True)
+        for _ in range(6):
+            origin = np.array([rng.uniform(-0.5, 2.5), rng.uniform(0.8, 3.0)])
+            ang = rng.uniform(-np.pi, np.pi, 200)
+            r = rng.uniform(0.05, 4.0, 200)
+            pts = origin + r[:, None] * np.column_stack((np.cos(ang), np.sin(ang)))
+            pts[:5] = np.nan
+            far = origin + 5.0 * np.column_stack((np.cos(ang[:20]), np.sin(ang[:20])))
+            assert a.update(pts, origin, far) == b._update_numpy(pts, origin, far)
+            assert np.array_equal(a.costs, b.costs)
+
+
+def test_sample_costs_whole_cell_shift_equals_cell_lookup() -> None:
+    from nav.costmap.static_layer import sample_costs
+
+    rng = np.random.default_rng(2)
+    static = rng.integers(0, 256, (80, 120)).astype(np.uint8)
+    sg = GridGeometry(RES, 120, 80, Pose2D(-1.0, -2.35, 0.0))
+    for _ in range(40):
+        ox, oy = math.floor(rng.uniform(-4, 6) / RES) * RES, math.floor(rng.uniform(-5, 3) / RES) * RES
+        tg = GridGeometry(RES, 60, 50, Pose2D(ox, oy, 0.0))
+        rr, cc = np.mgrid[0:50, 0:60]
+        rows, cols = sg.world_to_cell(tg.cell_to_world(rr.ravel(), cc.ravel()))
+        inside = sg.in_bounds(rows, cols)
+        want = np.full(rows.shape, NO_INFORMATION, dtype=np.uint8)
+        want[inside] = static[rows[inside], cols[inside]]
+        assert np.array_equal(sample_costs(static, sg, tg), want.reshape(50, 60))
+
+
+def test_cells_in_polygon_equals_point_in_polygon_of_cell_centres() -> None:
+    from nav.costmap.footprint import cells_in_polygon
+    from robot.sim.world import points_in_polygon
+
+    rng = np.random.default_rng(6)
+    geo = GridGeometry(RES, 40, 40, Pose2D(0.3, -0.2, 0.0))
+    for _ in range(30):
+        ang = np.sort(rng.uniform(0, 2 * np.pi, rng.integers(3, 9)))
+        poly = np.array([1.3, 0.8]) + rng.uniform(0.1, 0.6, ang.size)[:, None] * np.column_stack(
+            (np.cos(ang), np.sin(ang))
+        )
+        rows, cols = cells_in_polygon(geo, poly)
+        rr, cc = np.mgrid[0:40, 0:40]
+        inside = points_in_polygon(geo.cell_to_world(rr.ravel(), cc.ravel()), poly)
+        want = set(zip(rr.ravel()[inside].tolist(), cc.ravel()[inside].tolist(), strict=True))
+        assert set(zip(rows.tolist(), cols.tolist(), strict=True)) == want

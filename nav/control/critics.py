@@ -30,7 +30,7 @@ import numpy as np
 
 from nav.control.footprint import CostWindow, FootprintModel
 from nav.control.footprint import _inside_polygon as _inside
-from nav.control.geometry import project_onto_polyline
+from nav.control.geometry import project_poses
 from nav.control.options import DwaOptions
 from nav.control.trajectory import TrajectorySet
 from nav.types import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, Pose2D, Twist2D, wrap_angle
@@ -49,6 +49,7 @@ class CriticContext:
     local_path: np.ndarray  # (M, 3) path ahead of the robot; its last pose is the local goal
     goal: Pose2D  # last pose of the whole path
     in_goal_window: bool  # latched: the robot has come within xy_goal_tolerance of the goal
+    local_path_length: float | None = None  # polyline_length(local_path) if the caller has it
     resolution: float = field(init=False)
     _projections: dict[float, tuple[np.ndarray, ...]] = field(init=False, default_factory=dict)
 
@@ -79,8 +80,7 @@ class CriticContext:
         key = round(forward, 9)
         hit = self._projections.get(key)
         if hit is None:
-            pts = self.last[:, :2] if key == 0.0 else self.forward_points(self.last, forward)
-            hit = self._projections[key] = project_onto_polyline(pts, self.local_path)
+            hit = self._projections[key] = project_poses(self.last, forward, self.local_path)
         return hit
 
     def path_distance(self, forward: float = 0.0) -> np.ndarray:
@@ -89,8 +89,9 @@ class CriticContext:
 
     @cached_property
     def path_length(self) -> float:
-        seg = np.diff(self.local_path[:, :2], axis=0)
-        return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
+        if self.local_path_length is not None:
+            return self.local_path_length
+        return polyline_length(self.local_path)
 
     def distance_to_go(self, forward: float = 0.0) -> np.ndarray:
         """Distance (m) from the (forward points of the) trajectory ends to the local goal *along
@@ -119,6 +120,12 @@ class CriticContext:
 
     def robot_to_goal(self) -> float:
         return math.hypot(self.pose.x - self.goal.x, self.pose.y - self.goal.y)
+
+
+def polyline_length(path: np.ndarray) -> float:
+    """Length (m) of the polyline through the (M, 2+) path's points."""
+    seg = np.diff(path[:, :2], axis=0)
+    return float(np.hypot(seg[:, 0], seg[:, 1]).sum())
 
 
 class Critic(Protocol):
@@ -421,11 +428,13 @@ class Oscillation:
 
     def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
         tw = ctx.trajectories.twists
-        illegal = (
-            self.x.oscillating(tw[:, 0]) | self.y.oscillating(tw[:, 1]) | self.theta.oscillating(tw[:, 2])
-        )
+        k = tw.shape[0]
+        illegal = np.zeros(k, dtype=bool)
+        for axis, trend in enumerate((self.x, self.y, self.theta)):
+            if trend.flipped:  # most cycles no axis has flipped: nothing to test
+                illegal |= trend.oscillating(tw[:, axis])
         self.vetoed = bool(illegal.any())
-        return np.zeros(tw.shape[0]), illegal
+        return np.zeros(k), illegal
 
     def debrief(self, cmd: Twist2D, pose: Pose2D) -> None:
         o = self.options

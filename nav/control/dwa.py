@@ -17,13 +17,57 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
-from nav.control.critics import Critic, CriticContext, make_critics
+from nav.control.critics import Critic, CriticContext, make_critics, polyline_length
 from nav.control.errors import ControllerError, InvalidPath, NoValidControl, PatienceExceeded
 from nav.control.footprint import CostWindow, FootprintModel
 from nav.control.options import DwaOptions
 from nav.control.trajectory import TrajectorySet, generate
 from nav.types import ZERO_TWIST, Costmap, Path, Pose2D, Twist2D
+
+
+@njit(cache=True, nogil=True)
+def _prune(
+    path: np.ndarray,
+    s: np.ndarray,
+    progress: int,
+    x: float,
+    y: float,
+    back: float,
+    ahead: float,
+    ox: float,
+    oy: float,
+    res: float,
+    width: int,
+    height: int,
+) -> tuple[int, int]:
+    """``DwaController._local_path`` in one compiled pass: the path index nearest (x, y) among
+    those from ``back`` m behind to ``ahead`` m past ``progress`` (``back`` < 0: all of them), and
+    the end (exclusive) of the segment ``ahead`` m from it, cut before the first vertex off the
+    costmap (``res`` > 0: an axis-aligned costmap with origin (ox, oy)). Same rules (searchsorted
+    sides, first-minimum ties) as the numpy code it replaces."""
+    n = path.shape[0]
+    if back >= 0.0:
+        lo = np.searchsorted(s, s[progress] - back, side="left")
+        hi = np.searchsorted(s, s[progress] + ahead, side="right")
+    else:
+        lo, hi = 0, n
+    if hi <= lo:
+        hi = lo + 1
+    nearest, best = lo, np.inf
+    for i in range(lo, hi):
+        d = math.hypot(path[i, 0] - x, path[i, 1] - y)
+        if d < best:
+            nearest, best = i, d
+    stop = max(np.searchsorted(s, s[nearest] + ahead, side="right"), nearest + 1)
+    if res > 0.0:
+        for i in range(nearest, stop):
+            c = math.floor((path[i, 0] - ox) / res)
+            r = math.floor((path[i, 1] - oy) / res)
+            if not (0 <= r < height and 0 <= c < width):
+                return nearest, max(i, nearest + 1)
+    return nearest, stop
 
 
 @dataclass(frozen=True)
@@ -66,6 +110,9 @@ class DwaController:
         self._in_window = False
         self._fail_cycles = 0
         self.last_debug: DwaDebug | None = None
+        self._local_span = (0, 0)  # path slice of the last local path
+        self._length_key: tuple[int, ...] | None = None  # (slice, size) of _length; None after set_path
+        self._length = 0.0
 
     # -- path -------------------------------------------------------------------------------------
     def set_path(self, path: Path) -> None:
@@ -76,6 +123,7 @@ class DwaController:
             raise InvalidPath("path must be a non-empty finite (N, 3) array")
         same_goal = self._path is not None and np.allclose(self._path[-1], poses[-1], atol=1e-6)
         self._path = poses
+        self._length_key = None
         seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
         self._s = np.concatenate(([0.0], np.cumsum(seg)))
         self._progress = 0
@@ -87,6 +135,7 @@ class DwaController:
     def reset(self) -> None:
         """Forget the path and all per-goal state."""
         self._path = None
+        self._length_key = None
         self._in_window = False
         self._fail_cycles = 0
         self.last_debug = None
@@ -118,24 +167,23 @@ class DwaController:
         """The path from its point closest to the robot to ``forward_prune_distance`` ahead (cut at
         the costmap's edge), searching only near the previous progress so loops do not confuse it."""
         assert self._path is not None
-        o = self.options
-        s, p = self._s, self._path
-        if o.prune_plan:
-            s0 = s[self._progress]
-            lo = int(np.searchsorted(s, s0 - o.prune_distance, side="left"))
-            hi = int(np.searchsorted(s, s0 + o.forward_prune_distance, side="right"))
+        o, g = self.options, costmap.geometry
+        back = o.prune_distance if o.prune_plan else -1.0  # < 0: search the whole path
+        if g.origin.theta == 0.0:  # the usual axis-aligned costmap: bounds tested in the kernel
+            box = (g.origin.x, g.origin.y, g.resolution, g.width, g.height)
         else:
-            lo, hi = 0, len(p)
-        cand = p[lo:hi, :2] if hi > lo else p[lo : lo + 1, :2]
-        nearest = lo + int(np.argmin(np.hypot(cand[:, 0] - pose.x, cand[:, 1] - pose.y)))
+            box = (0.0, 0.0, 0.0, 0, 0)  # resolution 0: no bounds test; done below
+        nearest, stop = _prune(
+            self._path, self._s, self._progress, pose.x, pose.y, back, o.forward_prune_distance, *box
+        )
         self._progress = nearest
-        end = int(np.searchsorted(s, s[nearest] + o.forward_prune_distance, side="right"))
-        seg = p[nearest : max(end, nearest + 1)]
-        rows, cols = costmap.geometry.world_to_cell(seg[:, :2])
-        inside = costmap.geometry.in_bounds(rows, cols)
-        if not inside.all():
-            first_out = int(np.argmin(inside))
-            seg = seg[: max(first_out, 1)]
+        self._local_span = (nearest, stop)
+        seg = self._path[nearest:stop]
+        if box[2] == 0.0:
+            rows, cols = g.world_to_cell(seg[:, :2])
+            inside = g.in_bounds(rows, cols)
+            if not inside.all():
+                seg = seg[: max(int(np.argmin(inside)), 1)]
         return seg
 
     # -- control ----------------------------------------------------------------------------------
@@ -153,6 +201,11 @@ class DwaController:
         goal = Pose2D.from_array(self._path[-1])
         self._in_window = self._in_window or pose.distance_to(goal) <= o.xy_goal_tolerance
         local_path = self._local_path(pose, costmap)
+        # the local path moves on only every few cycles (one path point per ~4 at cruise speed):
+        # its length is kept while the same slice of the same path is used
+        span = (*self._local_span, len(local_path))
+        if self._length_key != span:
+            self._length_key, self._length = span, polyline_length(local_path)
         trajs: TrajectorySet = generate(o, pose, velocity)
         window = CostWindow.around(costmap, trajs.poses, o.circumscribed_radius, o.unknown_is_lethal)
         ctx = CriticContext(
@@ -165,6 +218,7 @@ class DwaController:
             local_path=local_path,
             goal=goal,
             in_goal_window=self._in_window,
+            local_path_length=self._length,
         )
         k = len(trajs)
         total = np.zeros(k)
@@ -177,14 +231,16 @@ class DwaController:
             weighted = w * cost if w != 0.0 else np.zeros(k)
             per_critic[critic.name] = weighted
             total += weighted
-            n_bad = int(np.count_nonzero(bad & ~illegal))
-            if n_bad:
-                rejections[critic.name] = n_bad
-            illegal |= bad
+            if bad.any():  # most critics reject nothing: skip the count
+                n_bad = int(np.count_nonzero(bad & ~illegal))
+                if n_bad:
+                    rejections[critic.name] = n_bad
+                illegal |= bad
         costs = np.where(illegal, np.inf, total)
         chosen = -1 if illegal.all() else int(np.argmin(costs))
+        xy32 = trajs.xy32 if trajs.xy32 is not None else trajs.poses[..., :2].astype(np.float32)
         debug = DwaDebug(
-            trajectories=trajs.poses[..., :2].astype(np.float32),
+            trajectories=xy32,
             twists=trajs.twists,
             costs=costs,
             chosen=chosen,

@@ -5,22 +5,33 @@ footprint is rasterised once per heading bin into a list of cell offsets (the un
 heading range, so it is conservative in heading), and a pose's footprint cost is the maximum over
 those offsets around the pose's cell (poses snap to their cell: error <= half a cell, the planner's
 own discretisation), a small compiled loop that stops at the first lethal cell when only a
-collision matters. For the "does it touch a lethal cell" test, the Euclidean distance
-transform of the lethal cells first clears every pose farther than the circumscribed radius from
-any obstacle, so only the few poses near obstacles are gathered. A round robot needs one bin, and
-its collision test is the distance transform alone.
+collision matters. For the "does it touch a lethal cell" test, a mask of the cells within the
+circumscribed radius of a lethal cell (the distance-transform test ``edt <= reach``, stamped by a
+compiled loop: cheaper than the transform for one small window per cycle) first clears every pose
+farther from any obstacle, so only the few poses near obstacles are gathered. A round robot needs
+one bin, and its collision test is the mask alone. On axis-aligned windows (the usual case) cell,
+heading bin and gather run in one compiled pass per call, without numpy temporaries.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
 
 import numpy as np
 from numba import njit
 from scipy import ndimage
 
-from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, Costmap, GridGeometry, Pose2D
+from nav.control.footprint_kernels import (
+    _crop,
+    _disc,
+    _lethal_poses,
+    _max_cost_poses,
+    _near_lethal,
+    _xy_bounds,
+)
+from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, Pose2D
 
 
 def _inside_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
@@ -117,26 +128,33 @@ class CostWindow:
 
     costs: np.ndarray  # (H, W) uint8
     geometry: GridGeometry  # geometry of the crop (origin shifted, same resolution and rotation)
+    _near: dict[float, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+
+    @cached_property
+    def _origin(self) -> np.ndarray | None:
+        """(x0, y0, theta0, 1 / resolution) for the compiled kernels; None for a rotated grid
+        (those take the general numpy path)."""
+        o = self.geometry.origin
+        if o.theta != 0.0:
+            return None
+        return np.array([o.x, o.y, o.theta, 1.0 / self.geometry.resolution])
 
     @staticmethod
     def around(costmap: Costmap, xy: np.ndarray, margin: float, unknown_is_lethal: bool) -> CostWindow:
         """Crop ``costmap`` to the bounding box of points ``xy`` (..., 2+) grown by ``margin`` metres."""
         g = costmap.geometry
-        x0, x1 = float(xy[..., 0].min()), float(xy[..., 0].max())
-        y0, y1 = float(xy[..., 1].min()), float(xy[..., 1].max())
-        corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
-        rows, cols = g.world_to_cell(corners)  # bounding box of the points, in cells
+        x0, x1, y0, y1 = _xy_bounds(xy.reshape(-1, xy.shape[-1]))
+        if g.origin.theta == 0.0:  # floor is monotonic: the box's cells are its corners' cells
+            o, res = g.origin, g.resolution
+            rows = (math.floor((y0 - o.y) / res), math.floor((y1 - o.y) / res))
+            cols = (math.floor((x0 - o.x) / res), math.floor((x1 - o.x) / res))
+        else:
+            corners = np.array([[x0, y0], [x1, y0], [x0, y1], [x1, y1]])
+            rows, cols = g.world_to_cell(corners)  # bounding box of the points, in cells
         m = math.ceil(margin / g.resolution) + 2
-        r0, r1 = int(rows.min()) - m, int(rows.max()) + m + 1
-        c0, c1 = int(cols.min()) - m, int(cols.max()) + m + 1
-        out = np.full((r1 - r0, c1 - c0), LETHAL_OBSTACLE, dtype=np.uint8)
-        sr0, sr1 = max(r0, 0), min(r1, g.height)
-        sc0, sc1 = max(c0, 0), min(c1, g.width)
-        if sr1 > sr0 and sc1 > sc0:
-            out[sr0 - r0 : sr1 - r0, sc0 - c0 : sc1 - c0] = costmap.costs[sr0:sr1, sc0:sc1]
-        unknown = out == NO_INFORMATION
-        if unknown.any():
-            out[unknown] = LETHAL_OBSTACLE if unknown_is_lethal else 0
+        r0, r1 = int(min(rows)) - m, int(max(rows)) + m + 1
+        c0, c1 = int(min(cols)) - m, int(max(cols)) + m + 1
+        out = _crop(costmap.costs, r0, r1, c0, c1, LETHAL_OBSTACLE if unknown_is_lethal else 0)
         origin = g.origin.compose(Pose2D(c0 * g.resolution, r0 * g.resolution, 0.0))
         return CostWindow(out, GridGeometry(g.resolution, c1 - c0, r1 - r0, origin))
 
@@ -175,14 +193,19 @@ class CostWindow:
 
     def footprint_costs(self, poses: np.ndarray, model: FootprintModel) -> np.ndarray:
         """Max cost under the footprint at each pose, shape ``poses.shape[:-1]``."""
-        rows, cols = self.cells(poses)
         if model.round:  # one max filter with the disc, then a plain lookup
+            rows, cols = self.cells(poses)
             off = model.offsets[0]
             r = int(np.abs(off).max())
             disc = np.zeros((2 * r + 1, 2 * r + 1), dtype=bool)
             disc[off[:, 0] + r, off[:, 1] + r] = True
             filtered = ndimage.maximum_filter(self.costs, footprint=disc, mode="nearest")
             return filtered[rows, cols]
+        if self._origin is not None:  # axis-aligned: one compiled pass, cells and bins inline
+            flat_offsets = model.offsets[..., 0] * self.costs.shape[1] + model.offsets[..., 1]
+            flat = _max_cost_poses(self.costs, _flat_poses(poses), self._origin, flat_offsets)
+            return flat.reshape(poses.shape[:-1])
+        rows, cols = self.cells(poses)
         flat = self._gather(rows.ravel(), cols.ravel(), poses[..., 2].ravel(), model)
         return flat.reshape(poses.shape[:-1])
 
@@ -190,31 +213,57 @@ class CostWindow:
         """(H, W) Euclidean distance (m) from each cell centre to the nearest lethal cell centre."""
         return ndimage.distance_transform_edt(self.costs < LETHAL_OBSTACLE) * self.geometry.resolution
 
+    def near_lethal(self, reach: float) -> np.ndarray:
+        """(H, W) whether a lethal cell centre lies within ``reach`` m of each cell centre: the
+        same answer as ``lethal_distance() <= reach``, from a compiled disc stamp (no transform).
+        Cached per reach: a cycle asks for the same one several times."""
+        near = self._near.get(reach)
+        if near is None:
+            near = self._near[reach] = _near_lethal(self.costs, _disc(self.geometry.resolution, reach))
+        return near
+
     def footprint_lethal(self, poses: np.ndarray, model: FootprintModel) -> np.ndarray:
         """Whether the footprint touches a lethal cell at each pose, shape ``poses.shape[:-1]``.
 
-        Round robots: the distance transform answers directly (a lethal cell centre within the
-        radius). Polygons: poses farther than the circumscribed radius (+ the rasterisation's reach)
-        from every lethal cell are clear without a gather; only the rest are gathered."""
+        Round robots: a lethal cell centre within the radius. Polygons: poses farther than the
+        circumscribed radius (+ the rasterisation's reach) from every lethal cell are clear
+        without a gather; only the rest are gathered, up to their first lethal cell."""
+        reach = model.circumscribed if model.round else model.circumscribed + 0.75 * self.geometry.resolution
+        near = self.near_lethal(reach)
+        if self._origin is not None:
+            got = _lethal_poses(self.costs, near, _poses_3d(poses), self._origin, model.offsets, model.round)
+            return got.reshape(poses.shape[:-1])
         rows, cols = self.cells(poses)
-        dist = self.lethal_distance()[rows, cols]
+        hit = near[rows, cols]
         if model.round:
-            return dist <= model.circumscribed
-        rows, cols, dist = rows.ravel(), cols.ravel(), dist.ravel()
-        near = np.flatnonzero(dist <= model.circumscribed + 0.75 * self.geometry.resolution)
+            return hit
+        rows, cols, hit = rows.ravel(), cols.ravel(), hit.ravel()
+        idx = np.flatnonzero(hit)
         out = np.zeros(rows.shape[0], dtype=bool)
-        if near.size:
-            theta = poses[..., 2].ravel()[near]
-            b = self._bins(theta, model)
+        if idx.size:
+            b = self._bins(poses[..., 2].ravel()[idx], model)
             # stop at the first lethal cell: "touches" needs no maximum
-            hit = _max_under(self.costs, rows[near], cols[near], b, model.offsets, LETHAL_OBSTACLE)
-            out[near] = hit >= LETHAL_OBSTACLE
+            got = _max_under(self.costs, rows[idx], cols[idx], b, model.offsets, LETHAL_OBSTACLE)
+            out[idx] = got >= LETHAL_OBSTACLE
         return out.reshape(poses.shape[:-1])
 
     def clearance(self, poses: np.ndarray) -> np.ndarray:
         """Distance (m) from each pose's cell to the nearest lethal cell, shape ``poses.shape[:-1]``."""
         rows, cols = self.cells(poses)
         return self.lethal_distance()[rows, cols]
+
+
+def _poses_3d(poses: np.ndarray) -> np.ndarray:
+    """(K, T, 3+) float64 view of (..., 3+) poses (no copy for the usual 1-3 dimensions)."""
+    p = np.asarray(poses, dtype=np.float64)
+    if p.ndim == 3:
+        return p
+    return p.reshape(-1 if p.ndim > 1 else 1, *p.shape[-2:]) if p.ndim > 2 else p.reshape(1, -1, p.shape[-1])
+
+
+def _flat_poses(poses: np.ndarray) -> np.ndarray:
+    """(N, 3) float64 C-contiguous view (or copy) of (..., 3) poses, for the kernels."""
+    return np.ascontiguousarray(poses[..., :3], dtype=np.float64).reshape(-1, 3)
 
 
 __all__ = ["CostWindow", "FootprintModel", "rasterize"]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
@@ -73,18 +74,32 @@ def sample_twists(options: DwaOptions, velocity: Twist2D) -> np.ndarray:
         dt,
         o.vtheta_samples,
     )
-    grid = np.empty((vx.size, vy.size, wz.size, 3))
-    grid[..., 0] = vx[:, None, None]
-    grid[..., 1] = vy[None, :, None]
-    grid[..., 2] = wz[None, None, :]
-    grid = grid.reshape(-1, 3)
-    speed_sq = grid[:, 0] ** 2 + grid[:, 1] ** 2
-    w_abs = np.abs(grid[:, 2])
-    bad = (speed_sq < o.min_speed_xy**2) & (w_abs < o.min_speed_theta)
-    bad |= (speed_sq == 0.0) & (w_abs == 0.0)
-    if o.max_speed_xy > 0:
-        bad |= speed_sq > o.max_speed_xy**2 + 1e-12
-    return grid[~bad]
+    max_sq = o.max_speed_xy**2 + 1e-12 if o.max_speed_xy > 0 else math.inf
+    return _grid(vx, vy, wz, o.min_speed_xy**2, o.min_speed_theta, max_sq)
+
+
+@njit(cache=True, nogil=True)
+def _grid(
+    vx: np.ndarray, vy: np.ndarray, wz: np.ndarray, min_xy_sq: float, min_theta: float, max_sq: float
+) -> np.ndarray:
+    """The (vx, vy, wz) grid in C order minus the invalid speeds (``max_sq``: the largest squared
+    speed allowed), in one pass, with no (K, 3) temporaries per test."""
+    out = np.empty((vx.size * vy.size * wz.size, 3))
+    k = 0
+    for a in vx:
+        for b in vy:
+            speed_sq = a**2 + b**2
+            for w in wz:
+                w_abs = abs(w)
+                if speed_sq < min_xy_sq and w_abs < min_theta:
+                    continue
+                if speed_sq == 0.0 and w_abs == 0.0:
+                    continue
+                if speed_sq > max_sq:
+                    continue
+                out[k, 0], out[k, 1], out[k, 2] = a, b, w
+                k += 1
+    return out[:k]
 
 
 def time_steps(options: DwaOptions, twists: np.ndarray) -> np.ndarray:
@@ -100,34 +115,70 @@ def time_steps(options: DwaOptions, twists: np.ndarray) -> np.ndarray:
     if o.discretize_by_time:
         n = math.ceil(o.sim_time / o.time_granularity)
     elif o.footprint_step:
-        sweep = np.hypot(twists[:, 0], twists[:, 1]) + o.circumscribed_radius * np.abs(twists[:, 2])
-        n = math.ceil(float(np.max(sweep, initial=0.0)) * o.sim_time / o.linear_granularity)
+        sweep = _max_sweep(np.ascontiguousarray(twists, dtype=np.float64), o.circumscribed_radius)
+        n = math.ceil(sweep * o.sim_time / o.linear_granularity)
     else:
         lin = float(np.max(np.hypot(twists[:, 0], twists[:, 1]), initial=0.0)) * o.sim_time
         ang = float(np.max(np.abs(twists[:, 2]), initial=0.0)) * o.sim_time
         n = math.ceil(max(lin / o.linear_granularity, ang / o.angular_granularity))
-    n = int(min(max(n, 1), o.max_steps))
-    return np.linspace(0.0, o.sim_time, n + 1)
+    return _time_grid(o.sim_time, int(min(max(n, 1), o.max_steps)))
 
 
 @njit(cache=True, nogil=True)
-def _arcs(x0: float, y0: float, th0: float, twists: np.ndarray, times: np.ndarray, out: np.ndarray) -> None:
-    c0, s0 = math.cos(th0), math.sin(th0)
+def _max_sweep(twists: np.ndarray, radius: float) -> float:
+    """max(0, max over twists of hypot(vx, vy) + radius * |wz|): how fast any footprint point moves."""
+    best = 0.0
     for k in range(twists.shape[0]):
+        best = max(best, math.hypot(twists[k, 0], twists[k, 1]) + radius * abs(twists[k, 2]))
+    return best
+
+
+@lru_cache(maxsize=64)
+def _time_grid(sim_time: float, n: int) -> np.ndarray:
+    """``linspace(0, sim_time, n + 1)``, read-only and shared: the same few grids recur every cycle."""
+    t = np.linspace(0.0, sim_time, n + 1)
+    t.flags.writeable = False
+    return t
+
+
+@njit(cache=True, nogil=True)
+def _arcs(
+    x0: float, y0: float, th0: float, twists: np.ndarray, times: np.ndarray, out: np.ndarray, xy32: np.ndarray
+) -> None:
+    c0, s0 = math.cos(th0), math.sin(th0)
+    k_n, t_n = twists.shape[0], times.shape[0]
+    # sin(w t) / w and (1 - cos(w t)) / w depend on w only, and a sampled window has ~20 distinct
+    # w for ~500 twists: one table row per distinct w (found by a short linear search) cuts the
+    # trigonometry ~20x with bit-identical values
+    seen = np.empty(k_n)
+    tab_s, tab_c = np.empty((k_n, t_n)), np.empty((k_n, t_n))
+    n_seen = 0
+    for k in range(k_n):
         vx, vy, w = twists[k, 0], twists[k, 1], twists[k, 2]
-        straight = abs(w) < 1e-9
-        for j in range(times.shape[0]):
-            t = times[j]
-            a = w * t
-            if straight:  # the w -> 0 limits
-                s, c = t, 0.5 * a * t
-            else:
-                s, c = math.sin(a) / w, (1.0 - math.cos(a)) / w
+        row = -1
+        for u in range(n_seen):
+            if seen[u] == w:
+                row = u
+                break
+        if row < 0:
+            row, n_seen = n_seen, n_seen + 1
+            seen[row] = w
+            straight = abs(w) < 1e-9
+            for j in range(t_n):
+                t = times[j]
+                a = w * t
+                if straight:  # the w -> 0 limits
+                    tab_s[row, j], tab_c[row, j] = t, 0.5 * a * t
+                else:
+                    tab_s[row, j], tab_c[row, j] = math.sin(a) / w, (1.0 - math.cos(a)) / w
+        for j in range(t_n):
+            s, c = tab_s[row, j], tab_c[row, j]
             bx = vx * s - vy * c
             by = vx * c + vy * s
             out[k, j, 0] = x0 + c0 * bx - s0 * by
             out[k, j, 1] = y0 + s0 * bx + c0 * by
-            out[k, j, 2] = th0 + a
+            out[k, j, 2] = th0 + w * times[j]
+            xy32[k, j, 0], xy32[k, j, 1] = out[k, j, 0], out[k, j, 1]
 
 
 def simulate_arcs(pose: Pose2D, twists: np.ndarray, times: np.ndarray) -> np.ndarray:
@@ -138,11 +189,17 @@ def simulate_arcs(pose: Pose2D, twists: np.ndarray, times: np.ndarray) -> np.nda
     with the w -> 0 limits (t and w t^2 / 2) for straight-line samples. A compiled loop: one pass
     without the (K, T) temporaries numpy would allocate for each term.
     """
+    return _simulate(pose, twists, times)[0]
+
+
+def _simulate(pose: Pose2D, twists: np.ndarray, times: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``simulate_arcs`` plus the (K, T, 2) float32 positions the debug output carries."""
     tw = np.ascontiguousarray(twists, dtype=np.float64)
     ts = np.ascontiguousarray(times, dtype=np.float64)
     out = np.empty((tw.shape[0], ts.shape[0], 3))
-    _arcs(float(pose.x), float(pose.y), float(pose.theta), tw, ts, out)
-    return out
+    xy32 = np.empty((tw.shape[0], ts.shape[0], 2), dtype=np.float32)
+    _arcs(float(pose.x), float(pose.y), float(pose.theta), tw, ts, out, xy32)
+    return out, xy32
 
 
 @dataclass(frozen=True)
@@ -153,6 +210,7 @@ class TrajectorySet:
     twists: np.ndarray
     times: np.ndarray
     poses: np.ndarray
+    xy32: np.ndarray | None = None  # (K, T, 2) float32 positions (the debug output), if made
 
     def __len__(self) -> int:
         return int(self.twists.shape[0])
@@ -162,4 +220,4 @@ def generate(options: DwaOptions, pose: Pose2D, velocity: Twist2D) -> Trajectory
     """Sample the dynamic window around ``velocity`` and simulate every sample from ``pose``."""
     twists = sample_twists(options, velocity)
     times = time_steps(options, twists)
-    return TrajectorySet(twists, times, simulate_arcs(pose, twists, times))
+    return TrajectorySet(twists, times, *_simulate(pose, twists, times))

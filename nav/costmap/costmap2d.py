@@ -23,6 +23,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from numba import njit
 
 from nav.costmap.footprint import cells_in_polygon, circle_footprint, footprint_cost, footprint_radii
 from nav.costmap.inflation import InflationOptions, cell_inflation_radius, inflate
@@ -87,6 +88,18 @@ def local_costmap_options(**overrides: object) -> CostmapOptions:
     return CostmapOptions(**base)  # type: ignore[arg-type]
 
 
+@njit(cache=True, nogil=True)
+def _combine(base: np.ndarray, obs: np.ndarray) -> np.ndarray:
+    """Nav2's ``updateWithMax`` of the obstacle layer onto a copy of ``base``: a known obstacle
+    cost replaces an unknown or lower master cost. One pass instead of five masked numpy ops."""
+    out = np.empty(base.shape, dtype=np.uint8)
+    for i in range(base.shape[0]):
+        for j in range(base.shape[1]):
+            b, o = base[i, j], obs[i, j]
+            out[i, j] = o if o != NO_INFORMATION and (b == NO_INFORMATION or b < o) else b
+    return out
+
+
 class Costmap2D:
     """A layered costmap over a fixed or rolling grid. See the module docstring."""
 
@@ -113,6 +126,7 @@ class Costmap2D:
             else None
         )
         self._inflation_cells = cell_inflation_radius(geometry.resolution, o.inflation_layer)
+        self._inscribed = o.inscribed_radius  # a polygon computation: once, not every refresh
         self._base = self._static_window()
         self._master = np.empty_like(self._base)
         self._dirty: Bounds | None = (0, geometry.height, 0, geometry.width)
@@ -251,16 +265,13 @@ class Costmap2D:
             max(c0 - 2 * r, 0),
             min(c1 + 2 * r, geo.width),
         )
-        combined = self._base[er0:er1, ec0:ec1].copy()
+        base = self._base[er0:er1, ec0:ec1]
         if self._obstacles is not None:
-            obs = self._obstacles.costs[er0:er1, ec0:ec1]
-            known = obs != NO_INFORMATION
-            take = known & ((combined == NO_INFORMATION) | (combined < obs))
-            combined[take] = obs[take]
+            combined = _combine(base, self._obstacles.costs[er0:er1, ec0:ec1])
+        else:
+            combined = base.copy()
         if self.options.use_inflation_layer:
-            combined = inflate(
-                combined, geo.resolution, self.options.inscribed_radius, self.options.inflation_layer
-            )
+            combined = inflate(combined, geo.resolution, self._inscribed, self.options.inflation_layer)
         self._master[ir0:ir1, ic0:ic1] = combined[ir0 - er0 : ir1 - er0, ic0 - ec0 : ic1 - ec0]
         self._dirty = None
 

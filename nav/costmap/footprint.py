@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+from numba import njit
 
 from nav.types import Costmap, GridGeometry
 
@@ -70,6 +71,32 @@ def footprint_cost(costmap: Costmap, poses: np.ndarray, footprint: np.ndarray | 
     return costs.max(axis=1).astype(np.uint8)
 
 
+@njit(cache=True, nogil=True)
+def _cells_inside(
+    poly: np.ndarray, r0: int, r1: int, c0: int, c1: int, res: float, ox: float, oy: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """``cells_in_polygon`` over rows r0..r1-1, cols c0..c1-1 of an axis-aligned grid: the same
+    crossing-number arithmetic per cell centre, without the (cells x edges) temporaries."""
+    n = poly.shape[0]
+    rows = np.empty((r1 - r0) * (c1 - c0), dtype=np.int64)
+    cols = np.empty_like(rows)
+    k = 0
+    for r in range(r0, r1):
+        y = (r + 0.5) * res + oy
+        for c in range(c0, c1):
+            x = (c + 0.5) * res + ox
+            count = 0
+            for e in range(n):
+                ax, ay = poly[e, 0], poly[e, 1]
+                bx, by = poly[(e + 1) % n, 0], poly[(e + 1) % n, 1]
+                if (ay > y) != (by > y) and x < ax + (y - ay) * (bx - ax) / (by - ay):
+                    count += 1
+            if count % 2 == 1:
+                rows[k], cols[k] = r, c
+                k += 1
+    return rows[:k], cols[:k]
+
+
 def cells_in_polygon(geo: GridGeometry, polygon_world: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(rows, cols) of grid cells whose centres lie inside a world-frame polygon (crossing-number
     test vectorized over the polygon's bounding box); used for footprint clearing."""
@@ -80,6 +107,8 @@ def cells_in_polygon(geo: GridGeometry, polygon_world: np.ndarray) -> tuple[np.n
     if r0 >= r1 or c0 >= c1:
         z = np.zeros(0, dtype=np.int64)
         return z, z
+    if geo.origin.theta == 0.0:  # the usual axis-aligned grid: one compiled pass over the box
+        return _cells_inside(poly, r0, r1, c0, c1, geo.resolution, geo.origin.x, geo.origin.y)
     rr, cc = np.mgrid[r0:r1, c0:c1]
     rr, cc = rr.ravel(), cc.ravel()
     xy = geo.cell_to_world(rr, cc)

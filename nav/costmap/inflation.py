@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 from numba import njit
@@ -64,6 +65,14 @@ def cost_lut(resolution: float, inscribed_radius: float, options: InflationOptio
     r = cell_inflation_radius(resolution, options)
     k = np.arange(r * r + 1, dtype=np.float64)
     return inflation_cost(np.sqrt(k) * resolution, inscribed_radius, options)
+
+
+@lru_cache(maxsize=16)
+def _cached_lut(resolution: float, inscribed_radius: float, options: InflationOptions) -> np.ndarray:
+    """``cost_lut``, read-only and shared: a costmap inflates with the same table every update."""
+    lut = cost_lut(resolution, inscribed_radius, options)
+    lut.flags.writeable = False
+    return lut
 
 
 @njit(cache=True, nogil=True)
@@ -152,7 +161,7 @@ def inflate(
     r = cell_inflation_radius(resolution, options)
     if r > 1000:
         raise ValueError(f"inflation_radius {options.inflation_radius} m is over 1000 cells")
-    lut = cost_lut(resolution, inscribed_radius, options)
+    lut = _cached_lut(resolution, inscribed_radius, options)
     return _inflate_kernel(
         np.ascontiguousarray(costs, dtype=np.uint8),
         r,

@@ -37,7 +37,7 @@ def _clip(x0: float, y0: float, dx: float, dy: float, w: float, h: float) -> tup
 
 
 @njit(cache=True, nogil=True)
-def _clear(costs: np.ndarray, seg: np.ndarray, value: np.uint8, include_end: bool) -> np.ndarray:
+def _clear(costs: np.ndarray, seg: np.ndarray, value: np.uint8, include_end: np.ndarray) -> np.ndarray:
     h, w = costs.shape
     bounds = np.array([h, -1, w, -1], dtype=np.int64)  # row0, row1 (inclusive here), col0, col1
     for i in range(seg.shape[0]):
@@ -59,7 +59,7 @@ def _clear(costs: np.ndarray, seg: np.ndarray, value: np.uint8, include_end: boo
         tdx = abs(1.0 / dx) if dx != 0.0 else np.inf
         tdy = abs(1.0 / dy) if dy != 0.0 else np.inf
         while True:
-            if include_end or c != end_c or r != end_r:
+            if include_end[i] or c != end_c or r != end_r:
                 costs[r, c] = value
                 bounds[0] = min(bounds[0], r)
                 bounds[1] = max(bounds[1], r)
@@ -86,12 +86,12 @@ def clear_segments(
     starts: np.ndarray,
     ends: np.ndarray,
     value: int,
-    include_end: bool = False,
+    include_end: bool | np.ndarray = False,
 ) -> tuple[int, int, int, int] | None:
     """Set every cell of ``costs`` (over ``geometry``) whose interior a world segment
     ``starts[i] -> ends[i]`` crosses to ``value``, except the cell holding the segment's end unless
-    ``include_end`` (it holds the return). Returns the written region (row0, row1, col0, col1),
-    half-open, or None when nothing was written."""
+    ``include_end`` (it holds the return; a bool, or one per segment). Returns the written region
+    (row0, row1, col0, col1), half-open, or None when nothing was written."""
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 2)
     ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2)
     if starts.shape[0] == 0:
@@ -102,7 +102,8 @@ def clear_segments(
         c, s = math.cos(o.theta), math.sin(o.theta)
         both = both @ np.array([[c, -s], [s, c]])
     seg = np.ascontiguousarray((both / geometry.resolution).reshape(-1, 4))
-    b = _clear(costs, seg, np.uint8(value), include_end)
+    flags = np.broadcast_to(np.asarray(include_end, dtype=np.bool_), (seg.shape[0],))
+    b = _clear(costs, seg, np.uint8(value), np.ascontiguousarray(flags))
     if b[1] < 0:
         return None
     return int(b[0]), int(b[1]) + 1, int(b[2]), int(b[3]) + 1

@@ -49,6 +49,15 @@ def static_costs(
 def sample_costs(static: np.ndarray, static_geometry: GridGeometry, target: GridGeometry) -> np.ndarray:
     """Static costs looked up at the cell centres of another grid (the rolling window): nearest cell,
     NO_INFORMATION off the static map."""
+    shift = _cell_shift(static_geometry, target)
+    if shift is not None:  # the rolling window's usual case: a whole-cell offset, so a slice copy
+        dr, dc = shift
+        out = np.full((target.height, target.width), NO_INFORMATION, dtype=np.uint8)
+        sr0, sr1 = max(dr, 0), min(dr + target.height, static_geometry.height)
+        sc0, sc1 = max(dc, 0), min(dc + target.width, static_geometry.width)
+        if sr1 > sr0 and sc1 > sc0:
+            out[sr0 - dr : sr1 - dr, sc0 - dc : sc1 - dc] = static[sr0:sr1, sc0:sc1]
+        return out
     rr, cc = np.mgrid[0 : target.height, 0 : target.width]
     xy = target.cell_to_world(rr.ravel(), cc.ravel())
     rows, cols = static_geometry.world_to_cell(xy)
@@ -56,3 +65,18 @@ def sample_costs(static: np.ndarray, static_geometry: GridGeometry, target: Grid
     out = np.full(rows.shape, NO_INFORMATION, dtype=np.uint8)
     out[inside] = static[rows[inside], cols[inside]]
     return out.reshape(target.height, target.width)
+
+
+def _cell_shift(static_geometry: GridGeometry, target: GridGeometry) -> tuple[int, int] | None:
+    """(rows, cols) of the target's cell (0, 0) in the static grid when both are axis-aligned with
+    the same resolution and their origins differ by whole cells (to well under half a cell, so each
+    target cell centre falls in exactly that static cell); None otherwise."""
+    a, b = static_geometry.origin, target.origin
+    if a.theta != 0.0 or b.theta != 0.0 or static_geometry.resolution != target.resolution:
+        return None
+    fc = (b.x - a.x) / target.resolution
+    fr = (b.y - a.y) / target.resolution
+    dc, dr = round(fc), round(fr)
+    if abs(fc - dc) > 1e-3 or abs(fr - dr) > 1e-3:
+        return None
+    return int(dr), int(dc)

@@ -10,6 +10,8 @@ same sample points.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from nav.types import Pose2D
@@ -48,11 +50,15 @@ class SimIr:
         self._in_range = self._dist[None, None, :] <= self._range[:, None, None] + 1e-12
         # farthest point any IR beam can reach from base_link
         self._reach = float(np.max(np.hypot(xy[:, 0], xy[:, 1]) + self._range)) if n else 0.0
+        self._mounts = [(float(x), float(y), float(r)) for (x, y), r in zip(xy, self._range, strict=True)]
 
     def read(self, world: World, base_pose: Pose2D, stamp: float) -> IrReading:
         n = len(self.sensors)
         people = len(world.people) > 0 and world.people.near(base_pose.x, base_pose.y, self._reach)
-        if not n or (not people and world.clearance_at(base_pose.x, base_pose.y) > self._reach):
+        if not n or (
+            not people
+            and (world.clearance_at(base_pose.x, base_pose.y) > self._reach or self._clear(world, base_pose))
+        ):
             return IrReading(stamp, np.zeros(n, dtype=bool), np.full(n, np.inf))
         pts = base_pose.transform_points(self._points)
         hit = world.raycaster.occupied_at(pts)
@@ -63,3 +69,14 @@ class SimIr:
         first = np.where(hit.any(axis=2), self._dist[hit.argmax(axis=2)], np.inf)  # (n, rays)
         nearest = first.min(axis=1)
         return IrReading(stamp, np.isfinite(nearest), nearest)
+
+    def _clear(self, world: World, base_pose: Pose2D) -> bool:
+        """Whether every sensor's samples (all within its range of its mount) are farther from any
+        static obstacle than that range: then nothing can be hit (scalar math, the usual case in a
+        corridor, where the whole-robot reach test fails but each forward sensor sees nothing)."""
+        c, s = math.cos(base_pose.theta), math.sin(base_pose.theta)
+        for x, y, r in self._mounts:
+            wx, wy = base_pose.x + c * x - s * y, base_pose.y + s * x + c * y
+            if world.clearance_at(wx, wy) <= r:
+                return False
+        return True

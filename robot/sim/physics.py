@@ -132,7 +132,7 @@ class SimBody:
         self.noise = NormalStream(rng)
         self.pose = pose
         self.velocity = Twist2D()  # motor twist (body frame)
-        self.wheel_angle = np.zeros(profile.wheel_count)  # cumulative radians, profile order
+        self._wheel = [0.0] * profile.wheel_count  # cumulative radians, profile order (see wheel_angle)
         self.samples = footprint_samples(
             profile.footprint_polygon(32), options.footprint_spacing, options.footprint_interior_spacing
         )
@@ -207,7 +207,9 @@ class SimBody:
             self.last_accel = (-v.vx / dt, -v.vy / dt)
             self.true_yaw_rate = 0.0
             return True
-        self.wheel_angle += self._rim_speeds(motor) * (dt / self.profile.wheel_radius)
+        # plain floats: four numpy ops per substep cost more than the arithmetic (same IEEE results)
+        k = dt / self.profile.wheel_radius
+        self._wheel = [a + v * k for a, v in zip(self._wheel, self._rim_speeds(motor), strict=True)]
         self.last_accel = ((vx - v.vx) / dt, (vy - v.vy) / dt)
         self.velocity = motor
         self.pose = candidate
@@ -216,14 +218,19 @@ class SimBody:
         self._rest = (candidate, world.version) if at_rest else None
         return False
 
-    def _rim_speeds(self, t: Twist2D) -> np.ndarray:
+    @property
+    def wheel_angle(self) -> np.ndarray:
+        """Cumulative wheel angles (radians), profile order."""
+        return np.array(self._wheel)
+
+    def _rim_speeds(self, t: Twist2D) -> list[float]:
         """Wheel rim speeds of the motor twist in profile order (scalar math: runs every substep)."""
         p = self.profile
         if p.is_omni:
             r = p.omni_radius * t.wz
-            return np.array([t.vy + r, -t.vx + r, -t.vy + r, t.vx + r])
+            return [t.vy + r, -t.vx + r, -t.vy + r, t.vx + r]
         vl, vr = t.vx - t.wz * p.track_width / 2.0, t.vx + t.wz * p.track_width / 2.0
-        return np.array([vl, vl, vr, vr] if p.wheel_count == 4 else [vl, vr])
+        return [vl, vl, vr, vr] if p.wheel_count == 4 else [vl, vr]
 
     def ticks(self) -> np.ndarray:
         """Cumulative encoder counts (int64), profile wheel order."""

@@ -1,0 +1,154 @@
+"""Compiled kernels behind ``nav.control.footprint.CostWindow``: the window crop, the "near a
+lethal cell" mask and the per-pose footprint gathers, each one pass over its poses with the same
+cell and heading-bin arithmetic as the numpy code paths they replace (results are identical).
+"""
+
+from __future__ import annotations
+
+import math
+from functools import lru_cache
+
+import numpy as np
+from numba import njit
+
+from nav.types import LETHAL_OBSTACLE, NO_INFORMATION
+
+
+@njit(cache=True, nogil=True)
+def _xy_bounds(xy: np.ndarray) -> tuple[float, float, float, float]:
+    """(x min, x max, y min, y max) of (N, 2+) points in one pass."""
+    x0 = x1 = xy[0, 0]
+    y0 = y1 = xy[0, 1]
+    for i in range(1, xy.shape[0]):
+        x, y = xy[i, 0], xy[i, 1]
+        x0, x1 = min(x0, x), max(x1, x)
+        y0, y1 = min(y0, y), max(y1, y)
+    return x0, x1, y0, y1
+
+
+@njit(cache=True, nogil=True)
+def _crop(costs: np.ndarray, r0: int, r1: int, c0: int, c1: int, unknown: int) -> np.ndarray:
+    """Rows r0..r1-1, cols c0..c1-1 of ``costs``: LETHAL off the grid, NO_INFORMATION -> ``unknown``."""
+    h, w = costs.shape
+    out = np.empty((r1 - r0, c1 - c0), dtype=np.uint8)
+    for r in range(r0, r1):
+        for c in range(c0, c1):
+            v = costs[r, c] if 0 <= r < h and 0 <= c < w else LETHAL_OBSTACLE
+            out[r - r0, c - c0] = unknown if v == NO_INFORMATION else v
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _near_lethal(costs: np.ndarray, disc: np.ndarray) -> np.ndarray:
+    """Cells within the disc offsets (N, 2) of a lethal cell: the distance-transform test
+    ``edt(costs < LETHAL) <= reach`` without the transform. Only lethal cells with a non-lethal
+    4-neighbour are stamped: the lethal cell nearest any other cell always has one (a step towards
+    that cell would otherwise be a nearer lethal cell)."""
+    h, w = costs.shape
+    near = np.zeros((h, w), dtype=np.bool_)
+    for r in range(h):
+        for c in range(w):
+            if costs[r, c] < 254:
+                continue
+            near[r, c] = True
+            edge = (
+                (r > 0 and costs[r - 1, c] < 254)
+                or (r + 1 < h and costs[r + 1, c] < 254)
+                or (c > 0 and costs[r, c - 1] < 254)
+                or (c + 1 < w and costs[r, c + 1] < 254)
+            )
+            if not edge:
+                continue
+            for j in range(disc.shape[0]):
+                rr, cc = r + disc[j, 0], c + disc[j, 1]
+                if 0 <= rr < h and 0 <= cc < w:
+                    near[rr, cc] = True
+    return near
+
+
+@njit(cache=True, nogil=True)
+def _pose_cell(x: float, y: float, x0: float, y0: float, inv: float, h: int, w: int) -> tuple[int, int]:
+    """``CostWindow.cells`` for one pose of an axis-aligned window (same arithmetic)."""
+    c = math.floor((x - x0) * inv)
+    r = math.floor((y - y0) * inv)
+    return min(max(r, 0), h - 1), min(max(c, 0), w - 1)
+
+
+@njit(cache=True, nogil=True)
+def _pose_bin(theta: float, theta0: float, scale: float, bins: int) -> int:
+    """``CostWindow._bins`` for one heading (np.rint: round half to even, like numpy)."""
+    if bins == 1:
+        return 0
+    return int(np.rint((theta - theta0) * scale)) % bins
+
+
+@njit(cache=True, nogil=True)
+def _lethal_poses(
+    costs: np.ndarray,
+    near: np.ndarray,
+    poses: np.ndarray,
+    origin: np.ndarray,
+    offsets: np.ndarray,
+    round_robot: bool,
+) -> np.ndarray:
+    """(K, T) whether the footprint touches a lethal cell at each of the (K, T, 3) poses (any
+    layout: the trajectories' future poses are a strided view): poses off the ``near`` mask are
+    clear; the rest gather their heading bin's offsets up to the first lethal one (round robots:
+    ``near`` is the answer)."""
+    h, w = costs.shape
+    x0, y0, theta0, inv = origin[0], origin[1], origin[2], origin[3]
+    bins = offsets.shape[0]
+    scale = bins / (2.0 * math.pi)
+    p = offsets.shape[1]
+    out = np.zeros(poses.shape[:2], dtype=np.bool_)
+    for k in range(poses.shape[0]):
+        for i in range(poses.shape[1]):
+            r, c = _pose_cell(poses[k, i, 0], poses[k, i, 1], x0, y0, inv, h, w)
+            if not near[r, c]:
+                continue
+            if round_robot:
+                out[k, i] = True
+                continue
+            off = offsets[_pose_bin(poses[k, i, 2], theta0, scale, bins)]
+            for j in range(p):
+                if costs[r + off[j, 0], c + off[j, 1]] >= 254:
+                    out[k, i] = True
+                    break
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _max_cost_poses(
+    costs: np.ndarray, poses: np.ndarray, origin: np.ndarray, flat_offsets: np.ndarray
+) -> np.ndarray:
+    """(N,) max cost under the binned footprint at each of the (N, 3) poses; ``flat_offsets``
+    (B, P) are the offsets as flat indices into ``costs`` (row * width + col): one add per cell
+    and a branch-free maximum."""
+    h, w = costs.shape
+    flat = costs.ravel()
+    x0, y0, theta0, inv = origin[0], origin[1], origin[2], origin[3]
+    bins = flat_offsets.shape[0]
+    scale = bins / (2.0 * math.pi)
+    n, p = poses.shape[0], flat_offsets.shape[1]
+    out = np.zeros(n, dtype=np.uint8)
+    for i in range(n):
+        r, c = _pose_cell(poses[i, 0], poses[i, 1], x0, y0, inv, h, w)
+        off = flat_offsets[_pose_bin(poses[i, 2], theta0, scale, bins)]
+        base = r * w + c
+        best = flat[base + off[0]]
+        for j in range(1, p):
+            best = max(best, flat[base + off[j]])
+        out[i] = best
+    return out
+
+
+@lru_cache(maxsize=32)
+def _disc(resolution: float, reach: float) -> np.ndarray:
+    """(N, 2) integer cell offsets within ``reach`` metres, by the same float test as
+    ``edt * resolution <= reach`` (so the mask equals the distance-transform test). Cached: one
+    robot asks for the same one or two every cycle."""
+    r = math.floor(reach / resolution) + 1
+    idx = np.arange(-r, r + 1)
+    dr, dc = np.meshgrid(idx, idx, indexing="ij")
+    keep = np.sqrt((dr * dr + dc * dc).astype(np.float64)) * resolution <= reach
+    return np.column_stack((dr[keep], dc[keep])).astype(np.int64)
