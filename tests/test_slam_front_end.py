@@ -51,10 +51,14 @@ def test_translation_window_covers_lagged_odometry() -> None:
         "match_every_scan": True,
         "wide_search_minimum_score": 0.0,  # no second, wider search: the fixed window alone
     }
-    narrow = _lagged_run(SlamOptions(linear_search_window=0.1, **fixed), lag=2)
-    wide = _lagged_run(SlamOptions(linear_search_window=0.3, **fixed), lag=2)
+    # a stiff pull towards the search's result (the old 10 / 40): the window alone decides
+    stiff = {**fixed, "translation_weight": 10.0, "rotation_weight": 40.0}
+    narrow = _lagged_run(SlamOptions(linear_search_window=0.1, **stiff), lag=2)
+    wide = _lagged_run(SlamOptions(linear_search_window=0.3, **stiff), lag=2)
     assert wide < 0.1, wide
     assert narrow > wide, (narrow, wide)
+    # with the default, weaker pull the refinement itself gets out of the narrow window's edge
+    assert _lagged_run(SlamOptions(linear_search_window=0.1, **fixed), lag=2) < 0.1
 
 
 def _slip_run(options: SlamOptions, slip: float = 0.35) -> float:

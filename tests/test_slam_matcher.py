@@ -78,3 +78,24 @@ def test_recovers_known_offset_on_real_intel_scans() -> None:
     pose2, score2 = match_scan(sm.field(), nxt.scan.points(), odo, window, REFINE)
     assert pose2.distance_to(odo) < 0.1 and abs(pose2.theta - odo.theta) < math.radians(3)
     assert score2 > 0.5
+
+
+def test_default_refinement_is_not_pinned_to_the_search_lattice() -> None:
+    # the truth lies half a lattice step (0.025 m) from every search pose: the refinement must
+    # get there; the old 10 / 40 pull towards the lattice pose kept ~0.028 m of that offset
+    from nav.slam.system import SlamOptions
+
+    grid, res = box_world()
+    rng = np.random.default_rng(2)
+    truth = Pose2D(3.0, 2.0, 0.4)
+    sm = _submap_from(cast_scan(grid, res, truth, 360, noise=0.005, rng=rng).points())
+    again = cast_scan(grid, res, truth, 360, noise=0.005, rng=rng).points()
+    window = SearchWindow(0.1, math.radians(10), math.radians(0.5))
+    o = SlamOptions()
+    default = RefineOptions(translation_weight=o.translation_weight, rotation_weight=o.rotation_weight)
+    stiff = RefineOptions(translation_weight=10.0, rotation_weight=40.0)
+    for offset in [(0.024, -0.026, 0.004), (0.074, 0.026, 0.0)]:
+        pose, _ = match_scan(sm.field(), again, Pose2D(*offset), window, default)
+        pinned, _ = match_scan(sm.field(), again, Pose2D(*offset), window, stiff)
+        assert math.hypot(pose.x, pose.y) < 0.015, pose
+        assert math.hypot(pinned.x, pinned.y) > 2 * math.hypot(pose.x, pose.y), (pinned, pose)

@@ -45,6 +45,20 @@ def _rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.column_stack((c * dx + s * dy, -s * dx + c * dy, th))
 
 
+def in_sensor_frame(trajectory: np.ndarray, sensor: np.ndarray) -> np.ndarray:
+    """(N, 4) ``t, x, y, theta`` trajectory of a frame fixed on the robot at ``sensor`` = (x, y,
+    theta) in the trajectory's frame (e.g. base_link poses -> the laser's poses).
+
+    The Freiburg relations were obtained by aligning the laser scans, so they relate *laser*
+    poses; scoring base_link poses of a robot whose laser is mounted off-centre adds an error of
+    up to twice the mount offset to every relation with a large heading change."""
+    p = trajectory[:, 1:4]
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    dx, dy, dth = (float(v) for v in sensor)
+    th = (p[:, 2] + dth + np.pi) % (2 * np.pi) - np.pi
+    return np.column_stack((trajectory[:, 0], p[:, 0] + c * dx - s * dy, p[:, 1] + s * dx + c * dy, th))
+
+
 def relation_errors(
     trajectory: np.ndarray, relations: np.ndarray, tolerance: float = 1e-3
 ) -> tuple[np.ndarray, np.ndarray, int]:
