@@ -6,6 +6,13 @@ plan to the current goal, replan every ``replan_period`` (Nav2's ``RateControlle
 once when the remaining path is blocked (Nav2 ``IsPathValid``), let the controller follow the path,
 check the goal (``GoalChecker``) and progress (``ProgressChecker``), and report *why* it stopped.
 
+Replanning hysteresis (``keep_valid_path``): a periodic replan that would send the robot on a much
+longer route is not taken while the current path is still valid (no lethal cell on what is left of
+it), as Nav2's ``navigate_w_replanning_only_if_path_becomes_invalid`` tree keeps its path and its
+``PathLongerOnApproach`` condition refuses a much longer one. Without it, lidar marks that close a
+narrow gap now and then make the 1 Hz replans flip between the gap and a detour, and the robot
+dithers between the two (greenhouse aisle at y 6.2: 537 against 178 path poses).
+
 Pure logic, no threads and no clock of its own: ``tick(now, ...)`` is called by the control loop.
 Planning goes through ``plan_fn`` (synchronous, default ``planner.plan``) or, for a worker thread,
 through ``request_plan`` (called with a ``PlanRequest``) and ``deliver_plan`` (the result, or the
@@ -51,6 +58,10 @@ class NavState(StrEnum):
 
 TERMINAL = frozenset({NavState.IDLE, NavState.SUCCEEDED, NavState.FAILED, NavState.CANCELLED})
 
+_ALWAYS_TAKEN = frozenset({"new goal", "blocked", "resume"})
+"""Replan reasons whose result replaces the path whatever its length: the current path is gone,
+blocked, or could not be followed (a recovery ran)."""
+
 
 @dataclass(frozen=True)
 class NavigatorOptions:
@@ -65,6 +76,16 @@ class NavigatorOptions:
     """Length of remaining path (m) checked for lethal cells each tick."""
     blocked_replan_period: float = 0.25
     """Minimum seconds between replans triggered by a blocked path (keeps planning off every tick)."""
+    keep_valid_path: bool = True
+    """Replanning hysteresis: while no lethal cell lies on the remaining path (Nav2 ``IsPathValid``,
+    ``max_cost`` 254), a replan longer than ``length_factor`` x the remaining length (and by more than
+    ``length_margin``) is not taken. Blocked-path replans, replans after a recovery (``resume``) and
+    similar or shorter routes are always taken."""
+    length_factor: float = 1.5
+    """How much longer (ratio) a new route must be to be refused while the current one is valid (Nav2
+    ``PathLongerOnApproach`` ``length_factor``, 2.0 there)."""
+    length_margin: float = 1.0
+    """... and by at least this many metres, so short remaining paths near the goal still update."""
     stuck_timeout: float = 10.0
     """Seconds in STUCK without ``resume()`` or a fresh path before the goal fails; inf: never."""
     nominal_speed: float = 0.26
@@ -172,6 +193,9 @@ class Navigator:
         self._activity = "idle"
         self._held: tuple[float, Twist2D, Any] | None = None  # (time, cmd, debug) of the last compute
         self._tick_dt = 0.0  # seconds between the last two ticks
+        self._local: Costmap | None = None  # the local costmap of the last tick
+        self._plan_reason = ""  # why the plan being waited for (or just computed) was asked for
+        self.plans_kept = 0  # replans refused by the hysteresis (the current path was kept)
 
     @classmethod
     def for_robot(
@@ -288,6 +312,7 @@ class Navigator:
         """Advance one control cycle and return the command to send."""
         local = local_costmap if local_costmap is not None else global_costmap
         self._now, self._pose, self._global = now, pose, global_costmap
+        self._local = local_costmap
         if self._last_now is not None and now > self._last_now:
             self._tick_dt = now - self._last_now
         self._update_speed(now, velocity)
@@ -377,6 +402,7 @@ class Navigator:
         if self._path is None and self._pending is not None and reason == "new goal":
             return  # the first plan is on its way
         self._last_attempt_time = now
+        self._plan_reason = reason
         goal = self._q.goals[self._q.index]
         if self._request_plan is not None:
             self._next_id += 1
@@ -400,9 +426,14 @@ class Navigator:
         goal = self._q.goals[self._q.index]
         poses = np.array(path.poses, dtype=float, copy=True)
         poses[-1, 2] = goal.theta  # the controller turns to the goal's heading, not the path's
-        self._path = Path(poses)
         seg = np.hypot(*np.diff(poses[:, :2], axis=0).T) if len(poses) > 1 else np.zeros(0)
-        self._path_s = np.concatenate(([0.0], np.cumsum(seg)))
+        s = np.concatenate(([0.0], np.cumsum(seg)))
+        if self._keep_current(float(s[-1])):
+            self.plans_kept += 1
+            self._last_plan_error = None
+            return
+        self._path = Path(poses)
+        self._path_s = s
         self._last_plan_time = self._now
         self._last_plan_error = None
         self.controller.set_path(self._path)
@@ -421,13 +452,30 @@ class Navigator:
             self._stuck(type(exc).__name__, f"path blocked and no new path: {exc}", exc)
         # otherwise keep following the current path; the next periodic replan tries again
 
-    def _blocked(self, local: Costmap | None) -> bool:
-        """Whether a lethal cell lies on the next ``blocked_check_distance`` m of the path."""
+    def _keep_current(self, new_length: float) -> bool:
+        """Hysteresis: refuse a new path of ``new_length`` m because the current one is still valid
+        and the new one is a much longer route (see ``NavigatorOptions.keep_valid_path``)."""
+        o = self.options
+        if not o.keep_valid_path or self._path is None or self._plan_reason in _ALWAYS_TAKEN:
+            return False
+        i = self._nearest_index()
+        remaining = float(self._path_s[-1] - self._path_s[i]) + self._pose.distance_to(
+            Pose2D.from_array(self._path.poses[i])
+        )
+        if new_length <= max(o.length_factor * remaining, remaining + o.length_margin):
+            return False  # a similar or shorter route: take it (it follows the costs as they are now)
+        # IsPathValid over everything left: the global costmap, and the local one where it reaches
+        return not self._blocked(self._local, math.inf)
+
+    def _blocked(self, local: Costmap | None, distance: float | None = None) -> bool:
+        """Whether a lethal cell lies on the next ``distance`` (default ``blocked_check_distance``)
+        m of the path, in the global costmap or ``local``."""
         if self._path is None:
             return False
         p, s = self._path.poses, self._path_s
         i = self._nearest_index()
-        j = int(np.searchsorted(s, s[i] + self.options.blocked_check_distance, side="right"))
+        ahead_m = self.options.blocked_check_distance if distance is None else distance
+        j = int(np.searchsorted(s, s[i] + ahead_m, side="right"))
         ahead = p[i : max(j, i + 1), :2]
         maps = [self._global] if local is None else [self._global, local]
         for cm in maps:

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -321,3 +322,103 @@ def test_person_stepping_in_30_cm_ahead() -> None:
     assert person_cm is not None and person_poses
     poly = np.asarray(SKID_FOOTPRINT)
     assert not any(footprint_hits_lethal(person_cm, p, poly) for p in person_poses)
+
+
+def _polyline(*pts: tuple[float, float], step: float = 0.05) -> Path:
+    """A path through ``pts`` sampled every ``step`` m (headings along the segments)."""
+    out = []
+    for (x0, y0), (x1, y1) in itertools.pairwise(pts):
+        n = max(int(math.hypot(x1 - x0, y1 - y0) / step), 1)
+        th = math.atan2(y1 - y0, x1 - x0)
+        out += [(x0 + (x1 - x0) * k / n, y0 + (y1 - y0) * k / n, th) for k in range(n)]
+    out.append((*pts[-1], out[-1][2]))
+    return Path(np.array(out))
+
+
+class _StandStill:
+    """A controller that records the paths it is given and never moves: only the navigator's choice
+    of path is under test."""
+
+    def __init__(self) -> None:
+        self.paths: list[Path] = []
+
+    def set_path(self, path: Path) -> None:
+        self.paths.append(path)
+
+    def compute(self, pose: Pose2D, velocity: Twist2D, costmap: Costmap) -> tuple[Twist2D, None]:
+        return Twist2D(), None
+
+    def reset(self) -> None:
+        pass
+
+
+SHORT = _polyline((1.0, 3.0), (5.0, 3.0))  # 4 m, straight through
+DETOUR = _polyline((1.0, 3.0), (1.0, 5.5), (5.0, 5.5), (5.0, 3.0))  # 9 m round
+
+
+def _flip_flop_nav(options: NavigatorOptions) -> tuple[Navigator, _StandStill, list[str]]:
+    """A navigator whose planner answers the short route, then alternates detour / short, as the
+    greenhouse planner did while lidar marks opened and closed a narrow gap; only the detour once
+    a lethal cell lies on the short route."""
+    ctl = _StandStill()
+    calls: list[str] = []
+
+    def plan(costmap: Costmap, start: Pose2D, goal: Pose2D) -> Path:
+        short_blocked = bool(np.any(costmap.cost_at(SHORT.poses[:, :2]) == 254))
+        calls.append("detour" if short_blocked or len(calls) % 2 else "short")
+        return DETOUR if calls[-1] == "detour" else SHORT
+
+    nav = Navigator(None, ctl, GoalChecker(), ProgressChecker(), options, plan_fn=plan)  # type: ignore[arg-type]
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    return nav, ctl, calls
+
+
+def test_hysteresis_keeps_a_valid_path_against_a_much_longer_replan() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    nav, ctl, calls = _flip_flop_nav(NavigatorOptions(replan_period=1.0))
+    run(nav, Pose2D(1.0, 3.0, 0.0), cm, 8.0, moves=False)
+    assert calls.count("detour") >= 3  # the planner kept offering the detour...
+    assert len(ctl.paths) == len(calls) - calls.count("detour")  # ...and it was never taken
+    assert nav.plans_kept == calls.count("detour")
+    assert nav.path is not None and len(nav.path) == len(SHORT)
+
+
+def test_without_hysteresis_the_path_flips_with_every_replan() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    nav, ctl, calls = _flip_flop_nav(NavigatorOptions(replan_period=1.0, keep_valid_path=False))
+    run(nav, Pose2D(1.0, 3.0, 0.0), cm, 8.0, moves=False)
+    assert len(ctl.paths) == len(calls) and nav.plans_kept == 0
+    assert {len(p) for p in ctl.paths} == {len(SHORT), len(DETOUR)}
+
+
+def test_hysteresis_takes_the_longer_route_once_the_current_one_is_blocked() -> None:
+    free = inflate(room(), inscribed=0.1)
+    blocked = inflate(box(room(), 3.0, 2.9, 3.1, 3.1), inscribed=0.1)  # lethal on the short route
+    nav, ctl, _ = _flip_flop_nav(NavigatorOptions(replan_period=1.0))
+    world = {"cm": free}
+    pose, now = Pose2D(1.0, 3.0, 0.0), 0.0
+    while now < 2.5:  # the detour offered at t = 1 is refused while the short path is free
+        nav.tick(now, pose, Twist2D(), world["cm"])
+        now += DT
+    assert nav.path is not None and len(nav.path) == len(SHORT) and nav.plans_kept == 1
+    world["cm"] = blocked
+    while now < 5.0:
+        nav.tick(now, pose, Twist2D(), world["cm"])
+        now += DT
+    # the short route is blocked: the detour is taken and then kept (the short one is invalid)
+    assert nav.path is not None and len(nav.path) == len(DETOUR)
+    assert len(ctl.paths[-1]) == len(DETOUR)
+
+
+def test_hysteresis_always_takes_a_shorter_route() -> None:
+    cm = inflate(room(), inscribed=0.1)
+    ctl = _StandStill()
+    answers = [DETOUR, SHORT]
+
+    def plan(costmap: Costmap, start: Pose2D, goal: Pose2D) -> Path:
+        return answers.pop(0) if answers else SHORT
+
+    nav = Navigator(None, ctl, GoalChecker(), ProgressChecker(), NavigatorOptions(), plan_fn=plan)  # type: ignore[arg-type]
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    run(nav, Pose2D(1.0, 3.0, 0.0), cm, 1.5, moves=False)
+    assert [len(p) for p in ctl.paths[:2]] == [len(DETOUR), len(SHORT)] and nav.plans_kept == 0

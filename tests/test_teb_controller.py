@@ -303,3 +303,35 @@ def test_options_for_robot_profiles() -> None:
     assert omni.holonomic and omni.max_vel_y == 1.5 and omni.robot_radius == 0.25 and omni.max_samples == 40
     with pytest.raises(TebConfigError, match="bogus"):
         TebOptions.for_robot(load_profile("omni4"), bogus=1)
+
+
+def test_feasibility_treats_lethal_cells_as_points_at_their_centres() -> None:
+    """A gap one cell wider than a 0.5 m round robot, with a lidar mark one cell into it on each
+    side (the greenhouse post): cell edges 0.5 m apart, centres 0.55 m. The outline test closes it
+    for good; the centre test leaves the robot +-2.5 cm, and still sees an obstacle inside the
+    footprint, which the outline test misses."""
+    from nav.control.teb import centre_collisions
+    from nav.costmap.footprint import circle_footprint, footprint_cost
+
+    res = 0.05
+    costs = np.zeros((40, 40), dtype=np.uint8)
+    costs[10, 15:25] = 254  # lower mark: cell y 0.50-0.55
+    costs[21, 15:25] = 254  # upper mark: cell y 1.05-1.10 -> edges 0.55 / 1.05, centres 0.525 / 1.075
+    cm = Costmap(GridGeometry(res, 40, 40, Pose2D()), costs)
+    poly = circle_footprint(0.25)
+    centred = np.array([[1.0, 0.80, 0.0]])
+    up = np.array([0.0, 1.0, 0.0])
+    assert footprint_cost(cm, centred + 0.001 * up, poly)[0] == 254  # knife edge: 1 mm off
+    for round_radius in (None, 0.25):
+        assert not centre_collisions(cm, centred + 0.02 * up, poly, round_radius)[0]
+        assert not centre_collisions(cm, centred - 0.02 * up, poly, round_radius)[0]
+        assert centre_collisions(cm, centred + 0.03 * up, poly, round_radius)[0]
+    inside = np.zeros_like(costs)
+    inside[16, 20] = 254  # one cell well inside the footprint, none on its outline
+    cm_in = Costmap(cm.geometry, inside)
+    assert footprint_cost(cm_in, centred, poly)[0] != 254
+    assert centre_collisions(cm_in, centred, poly)[0] and centre_collisions(cm_in, centred, poly, 0.25)[0]
+    # off the map: free unless unknown is lethal
+    edge = np.array([[0.1, 1.0, 0.0]])
+    assert not centre_collisions(cm, edge, poly)[0]
+    assert centre_collisions(cm, edge, poly, None, unknown_is_lethal=True)[0]
