@@ -486,6 +486,11 @@ class Session:
             "fault": self.fault,
         }
 
+    def restart_trail(self) -> None:
+        """Forget the trail (loop thread only): the pose jumped to a new estimate or map frame, and the
+        old points would draw a line the robot never drove."""
+        self._trail.clear()
+
     def set_grid(self, grid: OccupancyGrid | None) -> None:
         self.grid = grid
         self.grid_version += 1

@@ -133,3 +133,40 @@ def test_people_walk_in_the_view(viewer: Viewer) -> None:
         np.testing.assert_allclose(centre, moved[0, :2], atol=1e-5)
     finally:
         s.close()
+
+
+def test_kidnapped_robot_initial_pose_clears_stale_marks() -> None:
+    """Scans taken after a kidnap but placed at the old estimate mark obstacles where there are none; the
+    operator's 2D Pose Estimate drops those marks from both costmaps (what the view's overlay shows)."""
+    from scipy.ndimage import distance_transform_edt
+
+    world = World.stock("apartment")
+    st = build_sim_stack(world.grid, world, world.start_pose)
+    s = st.session
+    clearance = distance_transform_edt(~world.occupied) * world.geometry.resolution
+
+    def stray_lethal() -> int:
+        """Lethal cells of both costmaps more than 0.15 m from anything in the world."""
+        n = 0
+        for cm in (st.navigation.global_costmap, st.navigation.local_costmap):
+            rr, cc = np.nonzero(cm.costs == 254)
+            r2, c2 = world.geometry.world_to_cell(cm.geometry.cell_to_world(rr, cc))
+            n += int(np.sum(clearance[r2, c2] > 0.15))
+        return n
+
+    try:
+        st.localization.set_initial_pose(world.start_pose)
+        s.run_for(1.5)
+        assert stray_lethal() == 0
+        st.driver.teleport(Pose2D(7.0, 3.6, s.pose.theta))  # 4 m away; the estimate stays put
+        s.run_for(2.5)
+        assert stray_lethal() > 20  # the other room's walls, drawn around the old estimate
+        st.localization.set_initial_pose(st.driver.truth_pose)
+        s.run_for(2.0)
+        assert stray_lethal() == 0
+        assert s.pose.distance_to(st.driver.truth_pose) < 0.1
+        # the view's trail restarts at the new estimate: no 4 m line the robot never drove
+        trail = s.bus.latest.trail
+        assert trail is None or np.max(np.hypot(*np.diff(trail, axis=0).T), initial=0.0) < 0.3
+    finally:
+        s.close()

@@ -206,3 +206,52 @@ def test_relay_refuses_when_unauthorized_or_no_viewer(viewer: Viewer) -> None:
 
 def test_viser_version_is_pinned() -> None:
     assert SUBPROTOCOL == f"viser-v{viser.__version__}" == "viser-v1.1.1"
+
+
+def test_client_page_is_unpacked_into_cacheable_files() -> None:
+    """``/viz/`` is viser's page with its packed bundle split out: the page names each file by content
+    hash, the files carry exactly what viser's own loader would produce, and they are cached for good."""
+    import re
+
+    from app.viewer.client import CLIENT_HTML, client_files, unpack
+
+    original = CLIENT_HTML.read_text(encoding="utf-8")
+    m = re.search(r'data-ss="(\d+)" data-cs="(\d+)"', original)
+    assert m is not None
+    files = client_files()
+    assert files is not None
+    with Served(None) as served:
+        base = f"http://127.0.0.1:{served.port}/viz/"
+        with urllib.request.urlopen(base) as r:
+            page = r.read().decode()
+            assert r.headers["cache-control"] == "no-cache"
+        assert 'id="root"' in page and "data-p=" not in page and len(page) < 10_000
+        refs = re.findall(r'(?:href|src)="(assets/[^"]+)"', page)
+        assert len(refs) == 4  # modulepreload bundle, preload wasm, stylesheet, boot module
+        got = {}
+        for ref in refs:
+            with urllib.request.urlopen(base + ref) as r:
+                assert r.headers["cache-control"] == "private, max-age=31536000, immutable"
+                got[ref.rsplit(".", 1)[1], ref.split("/")[1].split("-")[0]] = (
+                    r.read(),
+                    r.headers["content-type"],
+                )
+        with pytest.raises(urllib.error.HTTPError) as err:
+            urllib.request.urlopen(base + "assets/nope.js")
+        assert err.value.code == 404
+    css, js = got["css", "viser"], got["js", "viser"]
+    assert (len(css[0]), len(js[0])) == (int(m.group(1)), int(m.group(2)))  # the sizes viser's loader expects
+    assert css[1].startswith("text/css") and js[1].startswith("text/javascript")
+    wasm, boot = got["wasm", "zstd"], got["js", "boot"]
+    assert wasm[0].startswith(b"\0asm") and wasm[1] == "application/wasm"  # compileStreaming needs this type
+    # the contract with the bundle: it reads the decoder from this global, published before it runs
+    assert b"__viserZstdWasm" in js[0] and b"globalThis.__viserZstdWasm = await" in boot[0]
+    assert unpack("<html><script>viser changed its loader</script></html>") is None  # -> original page
+
+
+def test_client_page_falls_back_to_viser_single_file(monkeypatch: pytest.MonkeyPatch) -> None:
+    import app.viewer.relay as relay
+
+    monkeypatch.setattr(relay, "client_files", lambda: None)
+    with Served(None) as served, urllib.request.urlopen(f"http://127.0.0.1:{served.port}/viz/") as r:
+        assert len(r.read()) == relay.CLIENT_HTML.stat().st_size

@@ -167,6 +167,17 @@ def test_map_pose_and_tile_image_follow_grid(viewer: Viewer) -> None:
     np.testing.assert_array_equal(img[20 * 4 + 1, 20 * 4 + 2], lut[100])  # wall row
 
 
+def test_initial_camera_follows_the_active_map(viewer: Viewer) -> None:
+    """New pages and "Reset View" look at the active map, also after it changed to another frame (a
+    mapping session's map has its origin where mapping started, not the stock map's)."""
+    cam = viewer.server.initial_camera
+    viewer.apply_grids(snap(grid=office_grid(200, 100, Pose2D(0.0, 0.0, 0.0)), grid_version=1))
+    np.testing.assert_allclose(cam.look_at, (5.0, 2.5, 0.0))
+    viewer.apply_grids(snap(grid=office_grid(200, 100, Pose2D(-12.0, 4.0, 0.0)), grid_version=2))
+    np.testing.assert_allclose(cam.look_at, (-7.0, 6.5, 0.0))
+    assert cam.position[2] > 0 and cam.position[1] < cam.look_at[1]  # above, from the map's -y side
+
+
 def test_optional_layers_and_checkboxes(viewer: Viewer) -> None:
     costs = np.zeros((50, 50), np.uint8)
     costs[20:30, 20:30] = 254

@@ -224,6 +224,7 @@ class Localization:
             self._check_global(now)
 
     def _apply(self, kind: str, arg: Any, now: float) -> None:
+        self.session.restart_trail()  # every request here moves the estimate (or its frame) at once
         if kind == "map":
             self.amcl = None
             self._particles = None

@@ -4,7 +4,8 @@ viser binds its own socket (127.0.0.1, ephemeral port) and has no ASGI hook, so 
 client page at ``GET /viz/`` and relays the websocket ``/viz`` byte-for-byte to viser, forwarding the
 ``viser-v<version>`` subprotocol (any other version is refused by viser with close code 1002). One
 origin and one port: sign-in can sit in front through ``authorize``, and no iframe reconnect trouble.
-The relay only copies bytes on uvicorn's loop; no decoding, no numpy.
+The relay only copies bytes on uvicorn's loop; no decoding, no numpy. The client page itself is viser's,
+unpacked into separate files (``client.py``) so the browser fetches and compiles the bundle sooner.
 """
 
 from __future__ import annotations
@@ -13,22 +14,23 @@ import asyncio
 import contextlib
 import inspect
 import logging
-import pathlib
+import threading
 from collections.abc import Awaitable, Callable
 from typing import TYPE_CHECKING
 
 import viser
 import websockets
-from fastapi import APIRouter, Request, WebSocket
-from fastapi.responses import FileResponse, RedirectResponse
+from fastapi import APIRouter, HTTPException, Request, WebSocket
+from fastapi.responses import FileResponse, RedirectResponse, Response
 from starlette.websockets import WebSocketDisconnect
+
+from app.viewer.client import CLIENT_HTML, client_files
 
 if TYPE_CHECKING:
     from app.viewer.scene import Viewer
 
 log = logging.getLogger(__name__)
 
-CLIENT_HTML = pathlib.Path(viser.__file__).parent / "client" / "build" / "index.html"
 SUBPROTOCOL = f"viser-v{viser.__version__}"
 
 Authorize = Callable[[WebSocket], bool | Awaitable[bool]]
@@ -45,14 +47,30 @@ def _allow_all(_ws: WebSocket) -> bool:
 def make_router(get_viewer: Callable[[], Viewer | None], authorize: Authorize = _allow_all) -> APIRouter:
     """Routes ``GET /viz`` (redirect), ``GET /viz/`` (viser client page) and ``WS /viz`` (relay)."""
     router = APIRouter()
+    # unpack the client now, off the caller's thread, so the first page load does not wait for it
+    threading.Thread(target=client_files, name="viser-client-unpack", daemon=True).start()
 
     @router.get("/viz", include_in_schema=False)
     async def viz_redirect(request: Request) -> RedirectResponse:
         return RedirectResponse(request.url.path + "/", status_code=307)  # keeps any mount prefix
 
     @router.get("/viz/", include_in_schema=False)
-    async def viz_index() -> FileResponse:
-        return FileResponse(CLIENT_HTML, media_type="text/html")
+    def viz_index() -> Response:
+        files = client_files()
+        if files is None:
+            return FileResponse(CLIENT_HTML, media_type="text/html")
+        # the page names its files by content hash: it must not outlive a viser upgrade
+        return Response(files.page, media_type="text/html", headers={"cache-control": "no-cache"})
+
+    @router.get("/viz/assets/{name}", include_in_schema=False)
+    def viz_asset(name: str) -> Response:
+        files = client_files()
+        asset = None if files is None else files.assets.get(name)
+        if asset is None:
+            raise HTTPException(404, "no such file")
+        # content-hashed names: cache for good (private: behind sign-in when that is on)
+        immutable = {"cache-control": "private, max-age=31536000, immutable"}
+        return Response(asset.body, media_type=asset.media_type, headers=immutable)
 
     @router.websocket("/viz")
     async def viz_ws(ws: WebSocket) -> None:

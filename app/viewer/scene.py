@@ -161,7 +161,7 @@ class Viewer:
         self._checks: dict[str, Any] = {}
         self._last: dict[str, Any] = {}  # identity of the last data drawn per layer
         self._pose = Pose2D()
-        self._camera_set = False
+        self._aimed_at: Any = None  # map geometry the initial camera (and "Reset View") looks at
         self._status_due = 0.0
 
     # ---------------------------------------------------------------- lifecycle
@@ -185,7 +185,7 @@ class Viewer:
             return
         self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
         self._last.clear()  # a restarted server has an empty scene: redraw everything
-        self._camera_set = False
+        self._aimed_at = None
         self._build_scene()
         self._build_gui()
         self._stop.clear()
@@ -601,7 +601,9 @@ class Viewer:
             self._last["grid"] = key
             if grid is not None:
                 encoded += self.map_layer.update(grid.geometry, grid.data)
-                if not self._camera_set:
+                if grid.geometry != self._aimed_at:
+                    # a new active map (another frame) or a growing SLAM map: new pages and "Reset View"
+                    # look at it; viser never moves a connected client's camera for this
                     self._aim_camera(grid.geometry)
             self._set_data("/map", grid is not None)
         cm = snap.extras.get("costmap")
@@ -618,13 +620,13 @@ class Viewer:
         return encoded
 
     def _aim_camera(self, geometry: Any) -> None:
-        """Initial camera: look down at the map centre at about 55 degrees from the horizon."""
+        """Initial camera (new pages, "Reset View"): the map centre from about 55 degrees up."""
         w, hgt = geometry.size_m
         c = geometry.origin.transform_points(np.array([[w / 2.0, hgt / 2.0]]))[0]
         span = max(w, hgt, 2.0)
         self.server.initial_camera.look_at = (float(c[0]), float(c[1]), 0.0)
         self.server.initial_camera.position = (float(c[0]), float(c[1] - 0.4 * span), 0.55 * span)
-        self._camera_set = True
+        self._aimed_at = geometry
 
     @staticmethod
     def status_text(snap: Snapshot) -> str:
