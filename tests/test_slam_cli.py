@@ -29,6 +29,24 @@ def test_slam_cli_writes_map_and_trajectory(tmp_path: Path, capsys: pytest.Captu
     assert "scans/s" in capsys.readouterr().err
 
 
+FR079 = SLAM_BENCHMARK / "bags/fr079.orig.bag"
+
+
+@pytest.mark.skipif(not FR079.exists(), reason="FR079 benchmark log not available")
+def test_slam_cli_laser_frame_trajectory(tmp_path: Path) -> None:
+    """``--frame laser`` writes the laser's poses: FR079's laser sits 0.04 m ahead of base_link."""
+    rows = {}
+    for frame in ("base_link", "laser"):
+        out = tmp_path / frame
+        args = ["slam", str(FR079), "--limit", "40", "--quiet", "--frame", frame, "--out", str(out)]
+        assert main(args) == 0
+        rows[frame] = np.loadtxt(out / "trajectory.txt", dtype=float)
+    base, laser = rows["base_link"], rows["laser"]
+    np.testing.assert_allclose(laser[:, 3], base[:, 3], atol=1e-9)  # same heading
+    ahead = (laser[:, 1] - base[:, 1]) * np.cos(base[:, 3]) + (laser[:, 2] - base[:, 2]) * np.sin(base[:, 3])
+    np.testing.assert_allclose(ahead, 0.04, atol=1e-3)
+
+
 def test_slam_cli_log_without_scans_fails_cleanly(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     log = tmp_path / "odom.log"
     log.write_text("ODOM 0.0 0.0 0.0 0 0 0 100.0 host 100.0\n")
