@@ -359,6 +359,8 @@ def test_open_run_and_replay(page, server: EmbeddedServer) -> None:
     if not (ARTIFACTS.parent / "frontend" / "runs.html").exists() or not has_route(server, "/api/replay"):
         pytest.skip("the runs page or the replay API is not in this server yet (runs issue)")
     page.goto(server.url + "/runs.html")
+    assert page.get_by_role("button", name="Emergency stop").is_visible()  # on every page
+    assert page.get_by_role("navigation", name="pages").get_by_role("link", name="Live").is_visible()
     row = page.locator("#runs-body tr.run").first
     try:
         row.wait_for(timeout=30_000)

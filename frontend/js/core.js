@@ -60,6 +60,15 @@ export async function api(method, path, body) {
   return data;
 }
 
+/** The header's E-STOP on the pages without the Live controls (Maps, Runs): latches; reset on Live. */
+export function wireEstop() {
+  const btn = $("#estop");
+  if (!btn) return;
+  btn.addEventListener("click", async () => {
+    try { await api("POST", "/api/robot/estop"); message("E-STOP latched: reset on the Live page", "error"); } catch { /* shown */ }
+  });
+}
+
 export function fmt(v, d = 2) { return v === null || v === undefined ? "–" : Number(v).toFixed(d); }
 
 /** Add a titled section to the side panel (feature modules call this for their controls). */

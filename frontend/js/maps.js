@@ -1,6 +1,6 @@
 // Maps page: gallery with thumbnails; open in the 3D view (activate), rename, delete, set active;
 // import a map_server YAML + image with upload progress; export as map.yaml + map.pgm.
-import { $, api, loadMe, message, upload } from "./core.js";
+import { $, api, loadMe, message, upload, wireEstop } from "./core.js";
 
 let activeId = null;
 
@@ -115,9 +115,7 @@ function initImport() {
 
 async function init() {
   await loadMe();
-  $("#estop").addEventListener("click", async () => {
-    try { await api("POST", "/api/robot/estop"); message("E-STOP latched: reset on the Live page", "error"); } catch { /* shown */ }
-  });
+  wireEstop();
   initImport();
   await refresh();
 }

@@ -1,6 +1,6 @@
 // Runs page: list with filters and paging, detail with numbers, trajectory over the map, speed plot,
 // event timeline (SVG drawn here, no libraries) and replay controls for the 3D view at /replay/viz/.
-import { $, api, fmt, message } from "./core.js";
+import { $, api, fmt, message, wireEstop } from "./core.js";
 
 const PAGE = 25;
 const SVG = "http://www.w3.org/2000/svg";
@@ -306,6 +306,7 @@ function initReplay() {
 
 // ------------------------------------------------------------------------------------------ init
 function init() {
+  wireEstop();
   $("#filters").onsubmit = (ev) => {
     ev.preventDefault();
     page.filters = Object.fromEntries(new FormData($("#filters")).entries());
