@@ -38,4 +38,9 @@ def discover() -> list[Benchmark]:
 
 
 def figure_dict(bench_name: str, fig: Figure) -> dict:
-    return {"benchmark": bench_name, **asdict(fig)}
+    """JSON-ready row: numpy scalars (a benchmark's ``value`` or ``ok`` computed with numpy) become
+    plain float / bool, which ``json`` can write."""
+    row = {"benchmark": bench_name, **asdict(fig)}
+    row["value"] = float(fig.value)
+    row["ok"] = None if fig.ok is None else bool(fig.ok)
+    return row

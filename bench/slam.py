@@ -92,7 +92,13 @@ def _log(name: str) -> list[Figure]:
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
     with tempfile.TemporaryDirectory() as out:
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
-        cli = "import sys; from app.cli import main; sys.exit(main())"
+        # The child reports its own peak RSS: RUSAGE_CHILDREN's ru_maxrss is the largest of all
+        # children so far, so a second log would inherit the first one's figure.
+        cli = (
+            "import resource, sys; from app.cli import main; rc = main(); "
+            "print(f'peak rss {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss} KiB', file=sys.stderr); "
+            "sys.exit(rc)"
+        )
         proc = subprocess.run(
             [sys.executable, "-c", cli, "slam", str(bag), "--out", out, "--quiet"],
             env=env,
@@ -103,7 +109,7 @@ def _log(name: str) -> list[Figure]:
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         traj = parse_trajectory((Path(out) / "trajectory.txt").read_text())
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    rss_mb = after.ru_maxrss / 1024  # Linux: KiB; the max over children so far (this is the largest)
+    rss_mb = int(re.search(r"peak rss (\d+) KiB", proc.stderr).group(1)) / 1024  # Linux: KiB
     relations = parse_relations((DATA / "relations" / f"{name}.relations").read_text())
     laser = load_raw_log(bag, max_scans=1).laser.as_array()  # the log's /tf_static mount
     score = score_trajectory(in_sensor_frame(traj, laser), relations)
