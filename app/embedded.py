@@ -26,7 +26,11 @@ class EmbeddedServer:
 
 
 @contextlib.contextmanager
-def serve_in_thread(settings: Settings, runtime: Runtime | None = None) -> Iterator[EmbeddedServer]:
+def serve_in_thread(
+    settings: Settings, runtime: Runtime | None = None, send_buffer: int | None = None
+) -> Iterator[EmbeddedServer]:
+    """``send_buffer``: SO_SNDBUF for the listening socket, which accepted connections inherit
+    (tests of stalled clients: the kernel's autotuned ~2 MB takes ~40 s of telemetry to fill)."""
     import uvicorn
 
     from app.main import create_app
@@ -34,6 +38,8 @@ def serve_in_thread(settings: Settings, runtime: Runtime | None = None) -> Itera
     runtime = runtime or Runtime.build(settings)
     app = create_app(runtime)
     sock = socket.socket()
+    if send_buffer is not None:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, send_buffer)
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
     server = uvicorn.Server(uvicorn.Config(app, log_level="warning", ws_max_size=1 << 20, lifespan="on"))

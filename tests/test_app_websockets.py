@@ -132,3 +132,35 @@ def test_estop_stops_robot_during_teleop(live_server) -> None:
         assert err["type"] == "error" and "estop" in err["error"]
         time.sleep(0.2)
         assert session.last_command.vx == 0.0
+
+
+def test_stalled_telemetry_client_is_dropped_without_slowing_others(tmp_path) -> None:
+    """A viewer that stops reading is dropped once its frames cannot be sent within 2 s; a healthy
+    viewer keeps its rate and the control loop its schedule meanwhile. The server's send buffer is
+    made small so the stalled connection fills up in seconds instead of ~40 s (same mechanism)."""
+    from conftest import make_settings
+
+    from app.embedded import serve_in_thread
+    from bench.load.run import open_stalled_client
+
+    with serve_in_thread(make_settings(tmp_path), send_buffer=16 * 1024) as server:
+        bus = server.runtime.session.bus
+        with connect(f"{server.ws_url}/ws/telemetry?hz=20") as healthy:
+            healthy.recv(timeout=5)
+            before = bus.subscriber_count
+            stalled = open_stalled_client(server.port)
+            try:
+                deadline = time.monotonic() + 60
+                while bus.subscriber_count <= before and time.monotonic() < deadline:
+                    healthy.recv(timeout=5)  # the stalled client has subscribed
+                received: list[float] = []
+                while bus.subscriber_count > before and time.monotonic() < deadline:
+                    healthy.recv(timeout=5)
+                    received.append(time.monotonic())
+                assert bus.subscriber_count == before, "the stalled client was never dropped"
+            finally:
+                stalled.close()
+        assert len(received) >= 20
+        rate = (len(received) - 1) / (received[-1] - received[0])
+        assert rate >= 9.0, f"the healthy viewer got {rate:.1f} Hz while the other one stalled"
+        assert server.runtime.session.stats.summary()["lateness_p99_ms"] < 50.0
