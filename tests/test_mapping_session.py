@@ -9,8 +9,11 @@ from app.modes import Mode, TransitionRefused
 from bench.mapping import (
     APARTMENT_LOOP,
     APARTMENT_START,
+    OFFICE_LOOP,
+    OFFICE_START,
     MappingDrive,
     build,
+    run_mapping,
     seen_wall_cells,
     teleop_loop,
     wall_coverage,
@@ -149,3 +152,14 @@ def test_loop_closure_corrects_injected_odometry_drift() -> None:
         assert s.pose.distance_to(truth) < drift / 2
     finally:
         drive.session.close()
+
+
+def test_office_corridor_loop_meets_issue_3() -> None:
+    # Issue 3: >= 95 % of the true wall cells within one cell of the built map after the out-and-back
+    # loop along the office's 25 m corridor (~10 s). Was 93.8 %: matches lagged behind the robot
+    # (points on newly seen walls pulled onto the mapped part; loop searches against the submap
+    # just left), so the corridor's far end came out 0.1 m short.
+    r = run_mapping("office", OFFICE_START, OFFICE_LOOP)
+    assert r["coverage"] >= 0.95, r
+    assert r["end_error"] < 0.1, r
+    assert r["loops"] > 0, r

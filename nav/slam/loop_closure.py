@@ -35,6 +35,7 @@ def find_loop_closure(
     window: SearchWindow,
     min_score: float,
     refine: RefineOptions,
+    match_unobserved_points: bool = True,
 ) -> LoopCandidate | None:
     """Search ``points`` (robot frame) in ``submap`` around ``guess_in_submap``; ``None`` if the best
     match scores below ``min_score`` (both after the coarse search and after refinement)."""
@@ -42,6 +43,16 @@ def find_loop_closure(
     coarse, score = correlative_search(field, points, guess_in_submap, window)
     if score < min_score:
         return None
+    if not match_unobserved_points:
+        # as in the front end: points in cells the submap never observed have no counterpart in
+        # it and would pull the match towards the part of it that was seen; chosen at the match
+        # found, then searched again without them
+        keep = submap.observed(coarse.transform_points(points))
+        if 3 <= np.count_nonzero(keep) < len(keep):
+            points = points[keep]
+            coarse, score = correlative_search(field, points, guess_in_submap, window)
+            if score < min_score:
+                return None
     pose, fine = refine_pose(field, points, coarse, coarse, refine)
     if fine < min_score:
         return None

@@ -49,6 +49,16 @@ class Submap:
             else:
                 self._field.splat(change.became_occupied)
 
+    def observed(self, xy: np.ndarray) -> np.ndarray:
+        """(N,) bool: the cells under the (N, 2) submap-frame points were observed (hit or passed
+        through by a ray) by a scan inserted so far."""
+        rows, cols = self.grid.cells(xy)
+        h, w = self.grid.shape
+        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
+        out = np.zeros(len(xy), dtype=bool)
+        out[inside] = self.grid.seen[rows[inside], cols[inside]]
+        return out
+
     def field(self, levels: int = 0) -> LikelihoodField:
         """Likelihood field of the current grid (kept up to date incrementally where possible)."""
         if self._field is None:

@@ -45,7 +45,9 @@ class SlamOptions:
     max_laser_range: float = 20.0
     """Returns farther than this are used as free-space misses only (m); slam_toolbox 20.0."""
     missing_data_ray_length: float = 5.0
-    """Length (m) of the free ray cast for a beam without return (Cartographer default 5)."""
+    """Length (m) of the free ray cast for a beam without return (Cartographer default 5), at most
+    the scan's ``range_max``: a 4 m lidar's no-return beam would otherwise clear the wall it just
+    missed past its range, and mark the cells behind it observed."""
     minimum_travel_distance: float = 0.1
     """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
     minimum_travel_heading: float = math.radians(5.0)
@@ -82,6 +84,16 @@ class SlamOptions:
     """Translation half-width (m) of that second search (coarse-to-fine, 2 levels)."""
     wide_angular_search_window: float = math.radians(30.0)
     """Rotation half-width (rad) of that second search."""
+    match_unobserved_points: bool = False
+    """Also match points that land in submap cells no scan has observed yet (False: such points
+    are left out; front end and loop closure). A point on a newly seen surface (a wall further
+    along at the edge of the range, a room's wall newly visible through a door) has no
+    counterpart in the submap, so the likelihood field pulls it onto the nearest mapped cell,
+    always on the side already seen: the match lags behind the true motion, and along the
+    office corridor this shortened the map by 0.1 m in 25 m (issue 3). The points are chosen
+    once, not per candidate (which would favour poses that put them onto mapped cells): at the
+    prediction, or at a first match with all points when that lands more than a cell / 1 deg
+    away (slip, lagging odometry); then the scan is matched again from the prediction."""
     search_levels: int = 0
     """Front-end coarse-to-fine levels over max-pooled fields (0 = exhaustive search); 2 cost 25 %
     less at equal accuracy on FR079's first 1600 scans (not yet measured on the full logs)."""
@@ -159,6 +171,11 @@ def _voxel_filter(pts: np.ndarray, size: float, max_points: int) -> np.ndarray:
     if pts.shape[0] > max_points:
         pts = pts[np.linspace(0, pts.shape[0] - 1, max_points).astype(np.int64)]
     return pts
+
+
+def _close(a: Pose2D, b: Pose2D, resolution: float) -> bool:
+    """Within a cell and a degree of each other."""
+    return a.distance_to(b) <= resolution and abs(a.relative_to(b).theta) <= math.radians(1.0)
 
 
 def _compose_arr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -254,7 +271,8 @@ class GraphSlam:
         miss = ~hit & ~np.isnan(r) & ~(r < max(o.min_laser_range, scan.range_min))
         rm = np.minimum(np.where(np.isfinite(r), r, np.inf), o.max_laser_range)
         rm = np.where(r > o.max_laser_range, np.minimum(rm, o.missing_data_ray_length), rm)
-        rm = np.where(np.isinf(r), o.missing_data_ray_length, rm)
+        # a beam without return says nothing beyond the sensor's own range: never clear past it
+        rm = np.where(np.isinf(r), min(o.missing_data_ray_length, scan.range_max), rm)
         pts = np.column_stack((r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])))
         misses = np.column_stack((rm[miss] * np.cos(a[miss]), rm[miss] * np.sin(a[miss])))
         return pts, misses
@@ -301,17 +319,39 @@ class GraphSlam:
             wide = o.linear_search_window + o.linear_search_window_per_radian * turn
             window = replace(window, linear_search_window=wide)
         try:
-            in_submap, self.last_score = match_scan(target.field(), match_pts, prior, window, self._refine)
-            if self.last_score < o.wide_search_minimum_score:
-                # poor fit: the prediction may be outside the window (slip, fast turn); search again
-                # wider and keep whichever fits better
-                field = target.field()
-                wide_pose, wide_score = match_scan(field, match_pts, prior, self._wide_window, self._refine)
-                if wide_score > self.last_score:
-                    in_submap, self.last_score = wide_pose, wide_score
+            if o.match_unobserved_points:
+                in_submap, self.last_score = self._search(target, match_pts, prior, window)
+            else:
+                # Points in cells the submap has not observed have no counterpart in it (a wall
+                # further along at the edge of the range, a room newly visible through a door);
+                # matched, they are pulled onto the nearest mapped cell, always on the side seen
+                # already, and the match lags behind the robot. They are left out, chosen once (not
+                # per candidate, which would favour poses that put them onto mapped cells) and the
+                # scan matched again from the same prediction. Chosen at the prediction, which is
+                # unbiased, unless the first match lands away from it (slip, lagging odometry: the
+                # right points would be chosen out), then at that match.
+                first, score = self._search(target, match_pts, prior, window)
+                ref = prior if _close(first, prior, o.resolution) else first
+                keep = target.observed(ref.transform_points(match_pts))
+                if 3 <= np.count_nonzero(keep) < len(keep):
+                    first, score = self._search(target, match_pts[keep], prior, window)
+                in_submap, self.last_score = first, score
         except ScanMatchError:
             return pred, match_pts
         return target.local_pose.compose(in_submap), match_pts
+
+    def _search(
+        self, target: Submap, pts: np.ndarray, prior: Pose2D, window: SearchWindow
+    ) -> tuple[Pose2D, float]:
+        """Match ``pts`` in ``target`` around ``prior``; a poor fit is searched again in the wide
+        window (the prediction may be outside the narrow one: slip, fast turn), the better kept."""
+        field = target.field()
+        pose, score = match_scan(field, pts, prior, window, self._refine)
+        if score < self.options.wide_search_minimum_score:
+            wide_pose, wide_score = match_scan(field, pts, prior, self._wide_window, self._refine)
+            if wide_score > score:
+                pose, score = wide_pose, wide_score
+        return pose, score
 
     def _matching_submap(self) -> Submap | None:
         active = [s for s in self._submaps[-2:] if not s.finished and s.nodes]
@@ -401,7 +441,13 @@ class GraphSlam:
             if i % o.loop_search_every_n_nodes:
                 continue
             d = np.hypot(*(centres - glob[i, :2]).T)
+            # not its own submaps nor the one just before them (as documented; it shares the
+            # older one's first half of the scans): a match there is no loop, the node sits at
+            # that submap's thin far edge, and on the office corridor such matches pulled the
+            # far end back by up to 0.1 m
             mine = set(nodes[i].submaps)
+            if mine:
+                mine.add(min(mine) - 1)
             order = [
                 k
                 for k in np.argsort(d, kind="stable")
@@ -418,6 +464,7 @@ class GraphSlam:
                     self._loop_window,
                     o.loop_match_minimum_response_fine,
                     self._refine,
+                    o.match_unobserved_points,
                 )
                 if cand is not None:
                     found.append(cand)
