@@ -30,6 +30,7 @@ from nav.control.critics import Oscillation
 from nav.control.footprint import CostWindow, FootprintModel
 from nav.control.geometry import polyline_distance, project_onto_polyline, project_poses
 from nav.control.trajectory import sample_twists, simulate_arcs, time_steps, window_1d
+from nav.costmap.footprint import circle_footprint
 from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
 
 SKID = DwaOptions(footprint=SKID_FOOTPRINT, min_vel_x=-0.15)
@@ -461,6 +462,50 @@ def test_near_lethal_mask_and_gather_equal_the_distance_transform_test() -> None
         assert np.array_equal(window.footprint_lethal(poses[:, 1:], model), full[:, 1:] >= 254)
 
 
+def test_round_robot_collision_test_uses_the_exact_pose_not_its_cell() -> None:
+    """A gap whose facing lethal cell centres lie 0.55 m apart (the greenhouse post's aisle with a
+    noisy mark on each side) is passable for a 0.5 m round robot near its centre line, whichever
+    cell the pose falls in. Snapping the pose to its cell flagged every pose of the gap (the cell
+    centres either side of the line are exactly 0.25 m from a mark): DWA stopped in the aisle and
+    the spin recovery ground the post's corner. Rotated grids give the same answer."""
+    for theta in (0.0, 0.4):
+        costs = np.zeros((20, 30), dtype=np.uint8)
+        costs[4, :] = 254  # centres at y = 0.225 (grid frame)
+        costs[15, :] = 254  # centres at y = 0.775
+        cm = Costmap(GridGeometry(RES, 30, 20, Pose2D(0.1, -0.2, theta)), costs)
+        model = FootprintModel.build(np.asarray(circle_footprint(0.25)), RES, 1, round_robot=True)
+        ys = np.array([0.476, 0.49, 0.499, 0.5, 0.501, 0.51, 0.524])  # clear: both marks > 0.25 m away
+        ys_hit = np.array([0.47, 0.474, 0.526, 0.53, 0.45])  # a mark < 0.25 m away
+        local = np.column_stack((np.full(12, 0.725), np.concatenate((ys, ys_hit))))  # a column centre
+        xy = cm.geometry.origin.transform_points(local)
+        poses = np.column_stack((xy, np.linspace(-3.0, 3.0, 12)))[None]
+        window = CostWindow.around(cm, poses, 0.3, unknown_is_lethal=False)
+        got = window.footprint_lethal(poses, model)[0]
+        assert not got[: len(ys)].any(), got
+        assert got[len(ys) :].all(), got
+
+
+def test_round_robot_collision_test_equals_the_exact_centre_distance() -> None:
+    """Random costmaps, poses and grid rotations: a round footprint collides exactly when a lethal
+    cell's centre lies strictly within the radius of the pose (TEB's ``centre_collisions``)."""
+    rng = np.random.default_rng(11)
+    model = FootprintModel.build(np.asarray(circle_footprint(0.25)), RES, 1, round_robot=True)
+    for trial in range(16):
+        h, w = rng.integers(20, 50, 2)
+        costs = rng.integers(0, 200, (h, w)).astype(np.uint8)
+        costs[rng.random((h, w)) < 0.05] = 254
+        cm = Costmap(GridGeometry(RES, int(w), int(h), Pose2D(-0.3, 0.2, 0.0 if trial % 2 else 0.4)), costs)
+        local = rng.uniform(0.25, 0.75, (30, 6, 2)) * np.array([w, h]) * RES
+        xy = cm.geometry.origin.transform_points(local.reshape(-1, 2)).reshape(local.shape)
+        poses = np.concatenate((xy, rng.uniform(-4, 4, (30, 6, 1))), axis=-1)
+        window = CostWindow.around(cm, poses, 0.3, unknown_is_lethal=False)
+        rr, cc = np.nonzero(window.costs >= 254)
+        centres = window.geometry.cell_to_world(rr, cc)
+        d = np.hypot(poses[..., 0, None] - centres[:, 0], poses[..., 1, None] - centres[:, 1]).min(axis=-1)
+        assert np.array_equal(window.footprint_lethal(poses, model), d < 0.25)
+        assert np.array_equal(window.footprint_lethal(poses[:, 1:], model), d[:, 1:] < 0.25)
+
+
 def test_footprint_step_spaces_poses_by_the_footprint_sweep() -> None:
     tw = np.array([[0.26, 0.0, 1.0], [0.0, 0.0, -1.0]])
     r = SKID.circumscribed_radius
@@ -475,6 +520,27 @@ def test_footprint_step_spaces_poses_by_the_footprint_sweep() -> None:
         assert np.hypot(np.diff(wx, axis=0), np.diff(wy, axis=0)).max() <= SKID.linear_granularity + 1e-9
     dwb = DwaOptions(footprint=SKID_FOOTPRINT, footprint_step=False)
     assert len(time_steps(dwb, tw)) - 1 == min(math.ceil(1.7 / dwb.angular_granularity), dwb.max_steps)
+
+
+def test_footprint_touching_a_mark_by_the_raster_margin_is_not_a_deadlock() -> None:
+    """A lethal cell the footprint's raster touches while its centre lies outside the polygon (the
+    apartment's wall end, goal 11): every trajectory's first pose still touches it, so DWB's strict
+    rule rejected them all and the robot stayed until the navigator gave up. The escape rule keeps
+    the trajectories that never come closer to it; straight on into it stays illegal."""
+    occ = room()
+    leg = (round(3.0 / RES) + 1, round(3.0 / RES) + 2)  # (row, col): centre at (3.125, 3.075)
+    occ[leg] = True
+    cm = inflate(occ, inscribed=0.1)
+    pose = Pose2D(2.99, 3.0, 0.0)  # front edge at x 3.11: crosses the leg's cell, 1.5 cm short of its centre
+    ctl = DwaController(SKID)
+    ctl.set_path(straight(2.5, 3.0, 5.0, 3.0))
+    cmd, dbg = ctl.compute(pose, Twist2D(), cm)
+    crit = next(c for c in ctl.critics if c.name == "ObstacleFootprint")
+    assert crit.escaping  # the raster says touching ...
+    assert dbg.legal.any() and not dbg.legal.all()  # ... yet there is a way out
+    ahead = np.flatnonzero((dbg.twists[:, 0] > 0.1) & (np.abs(dbg.twists[:, 2]) < 1e-9))
+    assert ahead.size and not dbg.legal[ahead].any()
+    assert cmd.vx <= 0.0 or abs(cmd.wz) > 0.0
 
 
 def test_footprint_already_touching_a_chair_leg_may_back_or_turn_out_but_not_deeper() -> None:

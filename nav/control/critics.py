@@ -183,10 +183,15 @@ class ObstacleFootprint(_Stateless):
 
     Escape (navdeck): when the footprint already overlaps a lethal cell where the robot stands
     (a 4 cm chair leg marked a cell too close, localisation jitter against a wall), DWB rejects
-    every trajectory and the robot is stuck for good. When a lethal cell's centre lies inside the
-    polygon, a trajectory is legal if it never reaches deeper into an obstacle than now (the
-    farthest a nearby lethal cell's centre lies inside the polygon, in m): turning in place or
-    backing out of the contact is allowed, pushing on is not."""
+    every trajectory and the robot is stuck for good. Then a trajectory is legal if it never
+    reaches deeper into an obstacle than now: the signed depth of the nearby lethal cells' centres
+    (how far the deepest one lies inside the polygon, in m; negative: minus the nearest one's
+    distance outside it) never exceeds the start's. Turning in place or backing out of the
+    contact is allowed, pushing on is not. This includes a footprint that touches only by the
+    raster's margin (a lethal cell its outline crosses, the cell's centre outside): it used to keep
+    DWB's strict rule, which rejects every trajectory there too, since each one's first pose still
+    touches (apartment goal 11: a wall end's mark 0.16 m from the centre of the skid robot, stuck
+    until the navigator gave up)."""
 
     name = "ObstacleFootprint"
 
@@ -200,19 +205,17 @@ class ObstacleFootprint(_Stateless):
         hit = ctx.footprint_lethal
         start = ctx.trajectories.poses[:1, :1]  # every trajectory starts at the robot's pose
         touching = bool(hit.any()) and bool(ctx.window.footprint_lethal(start, ctx.footprint)[0, 0])
-        depth = self._depth(ctx) if touching else None  # (K, T)
-        # only a real overlap (a lethal cell's centre inside the polygon) escapes; a footprint that
-        # merely touches by the raster's conservative margin keeps DWB's strict rule
-        self.escaping = depth is not None and depth[0, 0] > 0.0
-        if not self.escaping:
+        self.escaping = touching
+        if not touching:
             return cost, np.any(hit, axis=1)
-        assert depth is not None
+        depth = self._depth(ctx)  # (K, T) signed
         deeper = depth[:, 1:] > depth[:, :1] + 1e-9
         return cost, np.any(deeper, axis=1)
 
     def _depth(self, ctx: CriticContext) -> np.ndarray:
-        """(K, T) how far (m) the lethal cells near the robot reach into the footprint polygon at
-        each pose: the largest distance from a covered cell's centre to the outline (0: none)."""
+        """(K, T) signed depth (m) of the lethal cells near the robot in the footprint polygon at
+        each pose: the largest distance from a covered cell's centre to the outline, or when no
+        centre is covered minus the smallest distance from a centre to the outline (-inf: none)."""
         w, poses = ctx.window, ctx.trajectories.poses
         reach = ctx.footprint.circumscribed + float(np.abs(poses[..., :2] - poses[:1, :1, :2]).max())
         rr, cc = np.nonzero(w.costs >= LETHAL_OBSTACLE)
@@ -220,7 +223,7 @@ class ObstacleFootprint(_Stateless):
         near = np.hypot(cells[:, 0] - ctx.pose.x, cells[:, 1] - ctx.pose.y) <= reach + w.geometry.resolution
         cells = cells[near]
         if cells.shape[0] == 0:
-            return np.zeros(poses.shape[:2])
+            return np.full(poses.shape[:2], -np.inf)
         poly = self._polygon()
         # cell centres in each pose's frame: (K, T, L, 2)
         dx = cells[None, None, :, 0] - poses[..., 0:1]
@@ -232,7 +235,7 @@ class ObstacleFootprint(_Stateless):
         t = np.clip(((pts[:, None, :] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
         edge = np.hypot(*(a + t[..., None] * ab - pts[:, None, :]).transpose(2, 0, 1)).min(axis=1)
         inside = _inside(pts, poly)
-        return np.where(inside, edge, 0.0).reshape(poses.shape[0], poses.shape[1], -1).max(axis=2)
+        return np.where(inside, edge, -edge).reshape(poses.shape[0], poses.shape[1], -1).max(axis=2)
 
     def _polygon(self) -> np.ndarray:
         o = self.options

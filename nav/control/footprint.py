@@ -9,8 +9,9 @@ collision matters. For the "does it touch a lethal cell" test, a mask of the cel
 circumscribed radius of a lethal cell (the distance-transform test ``edt <= reach``, stamped by a
 compiled loop: cheaper than the transform for one small window per cycle) first clears every pose
 farther from any obstacle, so only the few poses near obstacles are gathered. A round robot needs
-one bin, and its collision test is the mask alone. On axis-aligned windows (the usual case) cell,
-heading bin and gather run in one compiled pass per call, without numpy temporaries.
+one bin, and its near poses are tested at their exact position against the lethal cells' centres.
+On axis-aligned windows (the usual case) cell, heading bin and gather run in one compiled pass per
+call, without numpy temporaries.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from nav.control.footprint_kernels import (
     _crop,
     _disc,
     _lethal_poses,
+    _lethal_round_poses,
     _max_cost_poses,
     _near_lethal,
     _xy_bounds,
@@ -225,18 +227,31 @@ class CostWindow:
     def footprint_lethal(self, poses: np.ndarray, model: FootprintModel) -> np.ndarray:
         """Whether the footprint touches a lethal cell at each pose, shape ``poses.shape[:-1]``.
 
-        Round robots: a lethal cell centre within the radius. Polygons: poses farther than the
-        circumscribed radius (+ the rasterisation's reach) from every lethal cell are clear
-        without a gather; only the rest are gathered, up to their first lethal cell."""
-        reach = model.circumscribed if model.round else model.circumscribed + 0.75 * self.geometry.resolution
+        Poses farther than the circumscribed radius + 0.75 cell from every lethal cell (cell
+        centres: the ``near`` mask) are clear without further work. Round robots: the rest are
+        tested at their exact position, a lethal cell being a point obstacle at its centre that
+        collides strictly inside the radius (TEB's ``centre_collisions``); snapping the pose to
+        its cell instead is off by up to 0.71 cell, and in a gap one cell wider than the robot it
+        flags every pose of the passable row (the robot stops in the gap, and the spin recovery
+        then grinds the post's corner). Polygons: the rest are gathered, up to their first
+        lethal cell."""
+        res = self.geometry.resolution
+        reach = model.circumscribed + 0.75 * res
         near = self.near_lethal(reach)
+        if model.round:  # exact pose against the lethal cells' centres (see _lethal_round_poses)
+            p3, origin = _poses_3d(poses), self._origin
+            if origin is None:  # rotated grid: the poses in the grid's frame, where it is axis-aligned
+                xy = self.geometry.origin.inverse().transform_points(p3[..., :2].reshape(-1, 2))
+                p3 = np.concatenate((xy.reshape(*p3.shape[:2], 2), p3[..., 2:3]), axis=-1)
+                origin = np.array([0.0, 0.0, 0.0, 1.0 / res])
+            disc = _disc(res, reach)
+            got = _lethal_round_poses(self.costs, near, p3, origin, disc, res, model.circumscribed)
+            return got.reshape(poses.shape[:-1])
         if self._origin is not None:
             got = _lethal_poses(self.costs, near, _poses_3d(poses), self._origin, model.offsets, model.round)
             return got.reshape(poses.shape[:-1])
         rows, cols = self.cells(poses)
         hit = near[rows, cols]
-        if model.round:
-            return hit
         rows, cols, hit = rows.ravel(), cols.ravel(), hit.ravel()
         idx = np.flatnonzero(hit)
         out = np.zeros(rows.shape[0], dtype=bool)

@@ -118,6 +118,44 @@ def _lethal_poses(
 
 
 @njit(cache=True, nogil=True)
+def _lethal_round_poses(
+    costs: np.ndarray,
+    near: np.ndarray,
+    poses: np.ndarray,
+    origin: np.ndarray,
+    disc: np.ndarray,
+    resolution: float,
+    radius: float,
+) -> np.ndarray:
+    """(K, T) whether a lethal cell's centre lies strictly within ``radius`` of each of the (K, T, 3)
+    poses' exact position (a round robot; a lethal cell is a point obstacle at its centre, as TEB's
+    ``centre_collisions``). ``near`` must hold the cells within ``radius`` + 0.75 cell of a lethal
+    centre (a pose lies at most half a cell diagonal, 0.71 cell, from its cell's centre) and
+    ``disc`` the cell offsets within that reach: poses off the mask are clear, the rest test the
+    lethal cells of their disc by exact distance."""
+    h, w = costs.shape
+    x0, y0, inv, res = origin[0], origin[1], origin[3], resolution
+    r2 = radius * radius
+    out = np.zeros(poses.shape[:2], dtype=np.bool_)
+    for k in range(poses.shape[0]):
+        for i in range(poses.shape[1]):
+            x, y = poses[k, i, 0], poses[k, i, 1]
+            r, c = _pose_cell(x, y, x0, y0, inv, h, w)
+            if not near[r, c]:
+                continue
+            for j in range(disc.shape[0]):
+                rr, cc = r + disc[j, 0], c + disc[j, 1]
+                if rr < 0 or rr >= h or cc < 0 or cc >= w or costs[rr, cc] < 254:
+                    continue
+                dx = x0 + (cc + 0.5) * res - x
+                dy = y0 + (rr + 0.5) * res - y
+                if dx * dx + dy * dy < r2:
+                    out[k, i] = True
+                    break
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _max_cost_poses(
     costs: np.ndarray, poses: np.ndarray, origin: np.ndarray, flat_offsets: np.ndarray
 ) -> np.ndarray:
