@@ -80,27 +80,32 @@ def make_router(get_viewer: Callable[[], Viewer | None], authorize: Authorize = 
         if not ok:
             await ws.close(code=CLOSE_POLICY)
             return
-        viewer = get_viewer()
-        if viewer is None or not viewer.running:
-            await ws.close(code=CLOSE_TRY_AGAIN)
-            return
-        protos = list(ws.scope.get("subprotocols", []))
-        try:
-            upstream = await websockets.connect(
-                f"ws://127.0.0.1:{viewer.port}",
-                subprotocols=protos or None,  # type: ignore[arg-type]
-                max_size=None,
-                compression=None,
-                open_timeout=5.0,
-            )
-        except (OSError, RuntimeError, websockets.InvalidHandshake, TimeoutError) as exc:
-            log.warning("viz relay: viser upstream unavailable: %s", exc)
-            await ws.close(code=CLOSE_TRY_AGAIN)
-            return
-        await ws.accept(subprotocol=upstream.subprotocol)
-        await relay(ws, upstream)
+        await relay_to_viewer(ws, get_viewer())
 
     return router
+
+
+async def relay_to_viewer(ws: WebSocket, viewer: Viewer | None) -> None:
+    """Accept ``ws`` and relay it to ``viewer``'s viser server, forwarding the client's subprotocol;
+    close with 1013 (try again later) when the viewer is not running or does not answer."""
+    if viewer is None or not viewer.running:
+        await ws.close(code=CLOSE_TRY_AGAIN)
+        return
+    protos = list(ws.scope.get("subprotocols", []))
+    try:
+        upstream = await websockets.connect(
+            f"ws://127.0.0.1:{viewer.port}",
+            subprotocols=protos or None,  # type: ignore[arg-type]
+            max_size=None,
+            compression=None,
+            open_timeout=5.0,
+        )
+    except (OSError, RuntimeError, websockets.InvalidHandshake, TimeoutError) as exc:
+        log.warning("viz relay: viser upstream unavailable: %s", exc)
+        await ws.close(code=CLOSE_TRY_AGAIN)
+        return
+    await ws.accept(subprotocol=upstream.subprotocol)
+    await relay(ws, upstream)
 
 
 async def relay(ws: WebSocket, upstream: websockets.ClientConnection) -> None:

@@ -295,27 +295,8 @@ async def replay_viz_index() -> FileResponse:
 @router.websocket("/replay/viz")
 async def replay_viz_ws(ws: WebSocket) -> None:
     """The replay viewer's viser websocket, relayed like the live one (app/viewer/relay.py)."""
-    import websockets
-
-    from app.viewer.relay import CLOSE_TRY_AGAIN, relay
+    from app.viewer.relay import relay_to_viewer
 
     rec = ws.app.state.runtime.features.get("recording")
     player = None if rec is None else rec.replay_if_started
-    viewer = None if player is None else player.viewer
-    if viewer is None or not viewer.running:
-        await ws.close(code=CLOSE_TRY_AGAIN)
-        return
-    protos = list(ws.scope.get("subprotocols", []))
-    try:
-        upstream = await websockets.connect(
-            f"ws://127.0.0.1:{viewer.port}",
-            subprotocols=protos or None,  # type: ignore[arg-type]
-            max_size=None,
-            compression=None,
-            open_timeout=5.0,
-        )
-    except (OSError, websockets.InvalidHandshake, TimeoutError):
-        await ws.close(code=CLOSE_TRY_AGAIN)
-        return
-    await ws.accept(subprotocol=upstream.subprotocol)
-    await relay(ws, upstream)
+    await relay_to_viewer(ws, None if player is None else player.viewer)
