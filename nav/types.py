@@ -129,6 +129,17 @@ class LaserScan:
         return np.column_stack((r * np.cos(a), r * np.sin(a)))
 
 
+def _cell_index(v: np.ndarray) -> np.ndarray:
+    """floor(v) as int64, with NaN, infinities and values no grid reaches (|v| >= 2**52) mapped to -1,
+    which every ``in_bounds`` refuses. Casting them is undefined in C: x86 gives INT64_MIN, but ARM
+    (the Jetson) turns NaN into 0, a real cell (a far-off goal on a rotated map overflows to NaN)."""
+    out = np.floor(v)
+    bad = ~(np.abs(out) < 2.0**52)  # NaN compares false
+    if bad.any():
+        out[bad] = -1.0
+    return out.astype(np.int64)
+
+
 @dataclass(frozen=True)
 class GridGeometry:
     """Geometry of a row-major grid like nav_msgs/OccupancyGrid: cell (row, col) = (0, 0) has its
@@ -142,13 +153,13 @@ class GridGeometry:
     def world_to_cell(self, xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(N, 2) world points -> integer (rows, cols); may fall outside the grid."""
         xy = np.asarray(xy, dtype=float).reshape(-1, 2)
-        if self.origin.theta != 0.0:
-            local = self.origin.inverse().transform_points(xy)
-        else:
-            local = xy - np.array([self.origin.x, self.origin.y])
-        cols = np.floor(local[:, 0] / self.resolution).astype(np.int64)
-        rows = np.floor(local[:, 1] / self.resolution).astype(np.int64)
-        return rows, cols
+        with np.errstate(over="ignore", invalid="ignore"):  # absurd points: off the grid, below
+            if self.origin.theta != 0.0:
+                local = self.origin.inverse().transform_points(xy)
+            else:
+                local = xy - np.array([self.origin.x, self.origin.y])
+            q = local / self.resolution
+        return _cell_index(q[:, 1]), _cell_index(q[:, 0])
 
     def cell_to_world(self, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """Cell centres as (N, 2) world points."""

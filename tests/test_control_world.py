@@ -166,3 +166,19 @@ def test_integrate_is_an_arc() -> None:
     p = integrate(Pose2D(), Twist2D(1.0, 0.0, math.pi / 2), 1.0, substeps=2000)
     r = 1.0 / (math.pi / 2)
     assert abs(p.x - r) < 1e-3 and abs(p.y - r) < 1e-3 and abs(p.theta - math.pi / 2) < 1e-9
+
+
+def test_world_to_cell_puts_non_finite_and_absurd_points_off_the_grid() -> None:
+    # Casting NaN/inf to int is undefined (x86: INT64_MIN; ARM, the Jetson: NaN -> 0, a real cell);
+    # a goal at 1e308 on a rotated map overflows to NaN in the transform.
+    import warnings
+
+    for theta in (0.0, 0.3):
+        geo = GridGeometry(0.05, 40, 30, Pose2D(-1.0, -1.0, theta))
+        bad = [[np.nan, 0.0], [0.0, np.inf], [-np.inf, 0.0], [1e308, 1e308], [1e30, 0.0]]
+        pts = np.array([*bad, [0.0, 0.0]])
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            rows, cols = geo.world_to_cell(pts)
+        inside = geo.in_bounds(rows, cols)
+        assert inside.tolist() == [False] * 5 + [True], (rows, cols)
