@@ -278,6 +278,12 @@ class Navigator:
             self.progress_checker.reset()
             self._force_plan = "resume"
 
+    def halt(self, reason: str, message: str) -> None:
+        """Enter STUCK for a cause the navigator cannot see itself (localization lost, the safety
+        layer holding the robot): it stops until ``resume()`` after a recovery, like any STUCK."""
+        if self.state not in TERMINAL and not self._cancel_requested:
+            self._enter_stuck(reason, message, None)
+
     def deliver_plan(self, request_id: int, result: Path | BaseException) -> None:
         """Hand in the result of a ``PlanRequest`` (a path, or the planner's exception). Call it
         from the control-loop thread (e.g. when polling the worker's future before ``tick``).
@@ -291,6 +297,11 @@ class Navigator:
             self._plan_failed(result)
         else:
             self._accept_plan(result)
+
+    @property
+    def stuck_reason(self) -> str:
+        """Why the navigator is STUCK (a typed error's name, or a ``halt`` reason); "" otherwise."""
+        return self._stuck_reason
 
     @property
     def path(self) -> Path | None:
@@ -510,12 +521,16 @@ class Navigator:
             self.state = NavState.FOLLOWING
 
     def _stuck(self, reason: str, message: str, error: BaseException | None) -> NavTick:
+        self._enter_stuck(reason, message, error)
+        return self._tick(ZERO_TWIST)
+
+    def _enter_stuck(self, reason: str, message: str, error: BaseException | None) -> None:
         if self.state != NavState.STUCK:
-            self._stuck_since = self._now
+            self._stuck_since = self._last_now if self._last_now is not None else 0.0
         self.state = NavState.STUCK
         self._stuck_reason, self._stuck_error = reason, error
+        self._held = None
         self._activity = f"stuck: {message}"
-        return self._tick(ZERO_TWIST)
 
     def _fail(self, reason: str, message: str, error: BaseException | None) -> NavTick:
         self._activity = f"failed: {message}"

@@ -16,6 +16,7 @@ returned behaviour through :meth:`RecoveryPolicy.tick` and sends ``policy.comman
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
 from enum import Enum
@@ -63,11 +64,18 @@ DEFAULT_STEPS: tuple[RecoveryStep, ...] = (
     RecoveryStep("back_up", {"backup_dist": 0.30, "backup_speed": 0.15}),
 )
 
-#: Lost robots relocalize first (source A), then fall back on the usual list.
+#: Lost robots turn until the scan matches the map (source A), and if that fails start
+#: localization over the whole map (a kidnapped robot); a robot the safety layer keeps stopping
+#: gives the obstacle (often a person) time to move, then backs away from it.
 DEFAULT_TRIGGER_STEPS: Mapping[str, tuple[RecoveryStep, ...]] = {
     Trigger.LOCALIZATION_DIVERGENCE.value: (
-        RecoveryStep("spin_until_matched"),
+        RecoveryStep("spin_until_matched", {"min_turn": math.pi, "match_score_threshold": 0.75}),
+        RecoveryStep("relocalize"),
         RecoveryStep("wait", {"wait_duration": 2.0}),
+    ),
+    Trigger.SAFETY_STOP.value: (
+        RecoveryStep("wait", {"wait_duration": 3.0}),
+        RecoveryStep("back_up", {"backup_dist": 0.30, "backup_speed": 0.15}),
     ),
 }
 

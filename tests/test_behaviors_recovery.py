@@ -3,6 +3,8 @@ config validation."""
 
 from __future__ import annotations
 
+import math
+
 import pytest
 from test_behaviors_units import SKID, empty_map, step
 
@@ -79,16 +81,37 @@ def test_retry_budget_then_give_up() -> None:
     assert b is not None and b.name == "clear_local_costmap"
 
 
-def test_localization_divergence_spins_until_matched() -> None:
+def test_localization_divergence_spins_until_matched_then_relocalizes() -> None:
     policy = RecoveryPolicy()
     ctx, _ = make_ctx()
-    ctx.scan_match_score = lambda: 0.9 if abs(ctx.pose.theta) > 1.0 else 0.1
+    resets: list[float] = []
+    ctx.reinitialize_localization = lambda: resets.append(ctx.now)
+    ctx.scan_match_score = lambda: 0.9  # matched all along (e.g. a look-alike room)
     b = policy.on_failure(Trigger.LOCALIZATION_DIVERGENCE, ctx)
     assert b is not None and b.name == "spin_until_matched"
     assert policy.run_to_end(ctx, lambda c, cmd: step(c, cmd)) is Status.SUCCEEDED
-    assert 1.0 < abs(ctx.pose.theta) < 1.2
+    assert math.pi - 1e-3 <= abs(b.turned) < math.pi + 0.15  # half a turn before a match counts
+    assert not resets
+    # lost again: localization restarts over the whole map, and the robot turns a whole turn
+    b = policy.on_failure(Trigger.LOCALIZATION_DIVERGENCE, ctx)
+    assert b is not None and b.name == "relocalize"
+    assert policy.run_to_end(ctx, lambda c, cmd: step(c, cmd)) is Status.SUCCEEDED
+    assert len(resets) == 1 and abs(b.turned) >= 2 * math.pi - 1e-3
     # other triggers keep their own place in the default list
     assert policy.on_failure(Trigger.PLANNER_FAILURE, ctx).name == "clear_local_costmap"
+
+
+def test_safety_stop_waits_then_backs_away() -> None:
+    policy = RecoveryPolicy()
+    ctx, _ = make_ctx()
+    names = []
+    for _ in range(2):
+        b = policy.on_failure(Trigger.SAFETY_STOP, ctx)
+        assert b is not None
+        names.append(b.name)
+        assert policy.run_to_end(ctx, lambda c, cmd: step(c, cmd)) is Status.SUCCEEDED
+    assert names == ["wait", "back_up"]
+    assert ctx.pose.x == pytest.approx(-0.30, abs=0.02)
 
 
 def test_failed_behaviour_is_reported_and_counted() -> None:
@@ -98,13 +121,13 @@ def test_failed_behaviour_is_reported_and_counted() -> None:
     costs = ctx.costmap.costs.copy()
     costs[:, : costs.shape[1] // 2 - 3] = 254  # wall right behind the robot
     ctx.costmap = type(ctx.costmap)(ctx.costmap.geometry, costs)
-    b = policy.on_failure(Trigger.SAFETY_STOP, ctx)
+    b = policy.on_failure(Trigger.NO_PROGRESS, ctx)
     assert b is not None and policy.active is None  # refused at start
     res = policy.events[-1]
     assert res.kind == "result" and res.status == "failed" and "refusing" in res.reason
     assert policy.attempts == 1
     assert policy.command.is_zero()
-    assert policy.on_failure(Trigger.SAFETY_STOP, ctx).name == "wait"
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "wait"
 
 
 def test_disabled_trigger_is_rejected() -> None:

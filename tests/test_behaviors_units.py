@@ -17,6 +17,8 @@ from nav.behaviors import (
     ClearCostmapOptions,
     DriveOnHeading,
     DriveOnHeadingOptions,
+    Relocalize,
+    RelocalizeOptions,
     Spin,
     SpinOptions,
     SpinUntilMatched,
@@ -151,6 +153,37 @@ def test_spin_until_matched_gives_up_after_a_full_turn() -> None:
     assert "no match" in spin.reason
 
 
+def test_spin_until_matched_trusts_a_match_only_after_min_turn() -> None:
+    ctx = ctx_at(scan_match_score=lambda: 0.9)  # matched from the start (a look-alike place)
+    spin = SpinUntilMatched(SpinUntilMatchedOptions(min_turn=2.0))
+    status, _ = run(spin, ctx)
+    assert status is Status.SUCCEEDED
+    assert 2.0 - 1e-3 <= abs(spin.turned) < 2.15
+
+
+def test_relocalize_restarts_localization_then_turns_a_whole_turn() -> None:
+    resets: list[float] = []
+    ctx = ctx_at(scan_match_score=lambda: 0.9)
+    ctx.reinitialize_localization = lambda: resets.append(ctx.now)
+    b = Relocalize()
+    status, _ = run(b, ctx, max_ticks=5000)
+    assert status is Status.SUCCEEDED
+    assert resets == [0.0]  # once, at the start
+    assert 2 * math.pi - 1e-3 <= abs(b.turned) < 2 * math.pi + 0.15
+    # no match at all: two turns, then it gives up
+    ctx = ctx_at(scan_match_score=lambda: 0.3, reinitialize_localization=lambda: None)
+    b = Relocalize(RelocalizeOptions(time_allowance=100.0))
+    status, _ = run(b, ctx, max_ticks=5000)
+    assert status is Status.FAILED and "no match" in b.reason
+    assert abs(b.turned) == pytest.approx(4 * math.pi, abs=0.06)
+
+
+def test_relocalize_needs_a_way_to_reinitialize() -> None:
+    b = Relocalize()
+    assert b.start(ctx_at(scan_match_score=lambda: 0.9)) is Status.FAILED
+    assert "reinitialize" in b.reason
+
+
 def test_spin_until_matched_needs_a_score() -> None:
     spin = SpinUntilMatched()
     assert spin.start(ctx_at()) is Status.FAILED
@@ -258,6 +291,8 @@ def test_clear_costmap_fails_without_callback_or_on_error() -> None:
         ("wait", {"wait_duration": -1.0}, "wait_duration"),
         ("spin", {"spin_speed": 1.0}, "spin_speed"),
         ("spin_until_matched", {"match_score_threshold": 1.5}, "match_score_threshold"),
+        ("spin_until_matched", {"min_turn": -1.0}, "min_turn"),
+        ("relocalize", {"min_turn": 20.0}, "relocalize.min_turn"),
     ],
 )
 def test_bad_options_are_refused_naming_the_field(name: str, params: dict, field: str) -> None:

@@ -422,3 +422,29 @@ def test_hysteresis_always_takes_a_shorter_route() -> None:
     nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
     run(nav, Pose2D(1.0, 3.0, 0.0), cm, 1.5, moves=False)
     assert [len(p) for p in ctl.paths[:2]] == [len(DETOUR), len(SHORT)] and nav.plans_kept == 0
+
+
+def test_halt_stops_with_the_given_reason_until_resumed() -> None:
+    # the server halts the navigator for causes it cannot see (localization lost, safety stop)
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav(options=NavigatorOptions(stuck_timeout=3.0))
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    ticks, poses = run(nav, Pose2D(1.0, 3.0, 0.0), cm, 1.0)
+    assert ticks[-1].state == NavState.FOLLOWING and not ticks[-1].cmd.is_zero()
+    nav.halt("LocalizationDiverged", "localization lost")
+    assert nav.state == NavState.STUCK and nav.stuck_reason == "LocalizationDiverged"
+    held, _ = run(nav, poses[-1], cm, 1.0, start=1.0)
+    assert all(t.cmd.is_zero() and t.state == NavState.STUCK for t in held)
+    assert held[-1].feedback.stuck_reason == "LocalizationDiverged"
+    nav.resume()
+    after, _ = run(nav, poses[-1], cm, 40.0, start=2.0)
+    assert after[-1].outcome is not None and after[-1].outcome.kind == "reached"
+    # never resumed: the goal fails with the halt's reason after stuck_timeout
+    nav.set_goals([Pose2D(1.0, 3.0, 0.0)])
+    run(nav, Pose2D(5.0, 3.0, 0.0), cm, 0.5, start=50.0)
+    nav.halt("SafetyStop", "held")
+    ticks, _ = run(nav, Pose2D(5.0, 3.0, 0.0), cm, 5.0, moves=False, start=50.5)
+    out = ticks[-1].outcome
+    assert out is not None and out.kind == "failed" and out.reason == "SafetyStop"
+    nav.halt("SafetyStop", "after the end")  # no effect once finished
+    assert nav.state == NavState.FAILED

@@ -424,3 +424,13 @@ def test_scan_bands_by_range_with_fixed_colours(viewer: Viewer) -> None:
     assert [len(b.points) for b in bands] == [0, 0, 8]
     for b, before, (_edge, rgb) in zip(bands, colors_before, palette.SCAN_BANDS, strict=True):
         assert b.colors is before and tuple(np.asarray(b.colors).reshape(-1)[:3]) == rgb
+
+
+def test_every_recovery_behaviour_has_its_own_colour() -> None:
+    # an operator tells recoveries apart by colour: a new behaviour must not show as "unknown" grey
+    from nav.behaviors import BEHAVIOR_NAMES
+
+    missing = [n for n in BEHAVIOR_NAMES if n not in palette.BEHAVIOR_COLORS]
+    assert not missing
+    colours = [palette.BEHAVIOR_COLORS[n] for n in BEHAVIOR_NAMES]
+    assert len(set(colours)) == len(colours)

@@ -16,7 +16,7 @@ import argparse
 import json
 import math
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -172,8 +172,14 @@ def _outline(polygon, spacing: float = 0.02):
     return np.vstack(pts)
 
 
-def drive(stack: SimStack, goals: Sequence[Pose2D], timeout: float) -> SimNavResult:
-    """Send ``goals`` and step the loop until the navigation outcome or ``timeout`` simulated s."""
+def drive(
+    stack: SimStack,
+    goals: Sequence[Pose2D],
+    timeout: float,
+    on_step: Callable[[SimStack, float], None] | None = None,
+) -> SimNavResult:
+    """Send ``goals`` and step the loop until the navigation outcome or ``timeout`` simulated s;
+    ``on_step(stack, elapsed)`` runs after every step (a scenario's events and its own figures)."""
     import numpy as np
 
     s, nav, world = stack.session, stack.navigation, stack.world
@@ -192,6 +198,8 @@ def drive(stack: SimStack, goals: Sequence[Pose2D], timeout: float) -> SimNavRes
     while s.clock.now() - t0 < timeout:
         s.clock.sleep_until(s.clock.now() + s.period)
         s.step()
+        if on_step is not None:
+            on_step(stack, s.clock.now() - t0)
         truth = stack.driver.truth_pose
         length += last.distance_to(truth)
         last = truth

@@ -69,6 +69,9 @@ class LocalizationOptions:
     """...its yaw standard deviation below this (rad)..."""
     min_quality: float = 0.5
     """...the scan fits the map at the estimate at least this well (``Amcl.quality``, 0..1)..."""
+    matched_std_xy: float = 0.3
+    """``match_score`` counts the scan's fit only while the estimate's x and y standard deviations
+    are within this (m; 0.04-0.11 while tracking in the scenario sets, up to 0.29 in the greenhouse)."""
     converged_updates: int = 3
     """...and all of it held for this many consecutive filter updates."""
     global_timeout: float = 60.0
@@ -294,10 +297,30 @@ class Localization:
             return Twist2D()
         return Twist2D(0.0, 0.0, self.options.spin_speed)
 
+    def reinitialize(self) -> None:
+        """Spread the particles over the free space at the next tick without changing mode (a
+        recovery behaviour of a robot that is lost while navigating turns in place meanwhile);
+        Nav2 amcl's ``reinitialize_global_localization`` service."""
+        with self._lock:
+            self._pending.append(("global", None))
+        self.session.add_event("localization", status="reinitialized over the whole map")
+
     # ------------------------------------------------------------------ outputs
     @property
     def quality(self) -> float:
         return self._quality
+
+    @property
+    def match_score(self) -> float:
+        """The scan's fit to the map at the estimate (``quality``) while the estimate is tight (x
+        and y standard deviations within ``matched_std_xy``), else 0: a spread cloud's mean can fit
+        by chance. What "spin until matched" and "relocalize" wait for."""
+        return self._quality if self.spread_xy <= self.options.matched_std_xy else 0.0
+
+    @property
+    def spread_xy(self) -> float:
+        """The estimate's larger x / y standard deviation (m)."""
+        return float(np.sqrt(max(self._cov[0, 0], self._cov[1, 1], 0.0)))
 
     @property
     def covariance(self) -> np.ndarray:

@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 
 from app.modes import Mode, TransitionRefused
+from nav.localization.divergence import DivergenceMonitor, DivergenceOptions
 from nav.navigator import TERMINAL
 from nav.planning.errors import PlannerError
 from nav.types import (
@@ -103,6 +104,8 @@ _TRIGGERS = {
     "NoProgress": "no_progress",
     "PatienceExceeded": "controller_failure",
     "NoValidControl": "controller_failure",
+    "LocalizationDiverged": "localization_divergence",
+    "SafetyStop": "safety_stop",
 }
 
 
@@ -140,9 +143,10 @@ class BehaviorRecovery:
             if feature.profile.footprint
             else None,
             limits=BehaviorLimits.from_profile(feature.profile),
-            scan_match_score=lambda: feature.localization.quality,
+            scan_match_score=lambda: feature.localization.match_score,
             clear_local_costmap=feature.clear_local_costmap,
             clear_global_costmap=feature.clear_global_costmap,
+            reinitialize_localization=feature.localization.reinitialize,
         )
 
     def reset(self) -> None:
@@ -200,6 +204,19 @@ class NavigationOptions:
     """TebOptions fields over the profile-derived ones."""
     recovery: bool = True
     """Install ``BehaviorRecovery`` (Nav2's recovery subtree) as the recovery hook."""
+    divergence: DivergenceOptions = field(default_factory=DivergenceOptions)
+    """When the robot counts as lost while navigating: it stops and the ``localization_divergence``
+    recovery list runs (spin until matched, then relocalize over the whole map)."""
+    jump_distance: float = 0.5
+    """A change of the map -> odom correction larger than this (m) between two ticks means the
+    estimate jumped (AMCL found the robot elsewhere): the obstacle layers are cleared, as after an
+    initial pose (the filter corrects a few cm per update while tracking)."""
+    jump_angle: float = 0.5
+    """The same for the heading (rad)."""
+    safety_stop_timeout: float = 5.0
+    """Seconds the safety layer may hold the robot (every command toward an obstacle stopped)
+    while navigating before the ``safety_stop`` recovery list runs; 0: never (then the progress
+    checker's 10 s decide, as in Nav2)."""
 
 
 class Navigation:
@@ -256,6 +273,10 @@ class Navigation:
         # (x, y, theta, behaviour) where each recovery attempt of the current request started; a new
         # tuple on each change so the viewer can tell by identity
         self._recovery_marks: tuple[tuple[float, float, float, str], ...] = ()
+        self.divergence = DivergenceMonitor(o.divergence)
+        self._seen_updates = 0  # localization updates already given to the divergence monitor
+        self._safety_stop_since: float | None = None
+        self._last_map_to_odom = session.map_to_odom
         self._build_costmaps(localization.grid)
         localization.add_map_listener(self._on_map)
         session.set_command_source(Mode.NAVIGATING, self._command)
@@ -418,6 +439,7 @@ class Navigation:
                 if self.recovery is not None and hasattr(self.recovery, "reset"):
                     self.recovery.reset()
                 self.last_outcome = None  # the outcome of *this* request, once it ends
+                self._watch_reset()
                 self._recovery_marks = ()  # markers are kept for the current navigation only
                 self._futures.clear()
                 self._active = True
@@ -436,6 +458,7 @@ class Navigation:
             self._cmd = ZERO_TWIST
             return
         if mode == Mode.RECOVERING:
+            self._lost()
             self._tick_recovery(now)
             return
         self._collect_plans()
@@ -447,16 +470,65 @@ class Navigation:
         self._cmd = tick.cmd
         if tick.outcome is not None:
             self._finish(tick, now)
-        elif tick.state.value == "stuck" and mode == Mode.NAVIGATING:
-            self._maybe_recover(tick.feedback.stuck_reason, now)
+            return
+        if tick.state.value != "stuck" and mode == Mode.NAVIGATING:
+            self._watch(session, now)
+        if self.navigator.state.value == "stuck" and mode == Mode.NAVIGATING:
+            self._maybe_recover(self.navigator.stuck_reason, now)
+
+    def _lost(self) -> bool:
+        """Give the divergence monitor the localization updates since the last call (during
+        recoveries too: a robot lost while backing off a phantom obstacle is still lost)."""
+        loc = self.localization
+        if loc.options.source != "amcl" or loc.updates == self._seen_updates:
+            return False
+        self._seen_updates = loc.updates
+        return self.divergence.update(loc.quality, loc.spread_xy)
+
+    def _watch(self, session: Session, now: float) -> None:
+        """Causes of getting stuck the navigator cannot see: the robot is lost (the divergence
+        monitor over localization updates), or the safety layer keeps stopping every command
+        (``safety_stop_timeout``). Either halts the navigator, and recovery takes over."""
+        if self._lost() or self.divergence.bad >= self.divergence.options.bad_updates:
+            self.navigator.halt("LocalizationDiverged", self.divergence.reason)
+            return
+        status = getattr(session.safety, "status", None)
+        timeout = self.options.safety_stop_timeout
+        if timeout <= 0 or status is None or status.action != "stop":
+            self._safety_stop_since = None
+        elif self._safety_stop_since is None:
+            self._safety_stop_since = now
+        elif now - self._safety_stop_since >= timeout:
+            self.navigator.halt(
+                "SafetyStop", f"the safety layer held the robot for {timeout:g} s: {status.reason}"
+            )
+
+    def _watch_reset(self) -> None:
+        self.divergence.reset()
+        self._seen_updates = self.localization.updates
+        self._safety_stop_since = None
 
     def _update_costmaps(self, session: Session, frame: SensorFrame, now: float) -> None:
         lp = self.localization.laser_pose
         pose = session.pose
         assert self._local is not None and self._global is not None
         loc = self.localization
-        if loc.resets != self._seen_resets:
-            # the pose jumped (initial pose, global reset): marks made from the old pose are wrong
+        # where the correction moved the robot's estimate (same odometry pose, old vs new map -> odom)
+        jump = session.map_to_odom.compose(session.odom_pose).relative_to(
+            self._last_map_to_odom.compose(session.odom_pose)
+        )
+        self._last_map_to_odom = session.map_to_odom
+        jumped = (
+            math.hypot(jump.x, jump.y) > self.options.jump_distance
+            or abs(jump.theta) > self.options.jump_angle
+        )
+        if loc.resets != self._seen_resets or jumped:
+            # the pose jumped (initial pose, global reset, or the filter found the robot elsewhere
+            # by itself): marks made from the old pose are in the wrong places
+            if jumped and loc.resets == self._seen_resets:
+                session.add_event(
+                    "localization", status="estimate jumped", distance=round(math.hypot(jump.x, jump.y), 2)
+                )
             self._seen_resets = loc.resets
             self.clear_costmaps()
         if not loc.localized:
@@ -540,6 +612,9 @@ class Navigation:
         cmd, done = self.recovery.tick(self, now)
         self._recovery_cmd = cmd
         if done:
+            if self.navigator.stuck_reason == "LocalizationDiverged":
+                self._watch_reset()  # judge the relocalized robot afresh
+            self._safety_stop_since = None
             self.navigator.resume()
             self.session.add_event("recovery", status="finished")
             self.session.modes.enter(Mode.NAVIGATING, "recovery finished")

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING
 
 from nav.types import Twist2D
 from robot.base import SensorFrame
-from robot.safety import SafetyFilter, SafetyOptions
+from robot.safety import SafetyFilter, SafetyOptions, SafetyStatus
 
 if TYPE_CHECKING:
     from app.runtime import Runtime
@@ -34,6 +34,11 @@ class SafetyFeature:
             self.session.add_event("safety", action=action, reason=reason)
         self._last_action = action
         return out, reason
+
+    @property
+    def status(self) -> SafetyStatus:
+        """The filter's verdict on the last command (the navigation stage's safety_stop trigger)."""
+        return self.filter.status
 
     def close(self) -> None:
         if self.session.safety is self:

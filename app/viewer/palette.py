@@ -132,8 +132,10 @@ BEHAVIOR_COLORS: dict[str, tuple[int, int, int]] = {
     "blocked": (230, 50, 50),  # no safe trajectory this cycle: stopped, looking for another way
     "clear_local_costmap": (0, 200, 230),
     "clear_global_costmap": (0, 140, 200),
+    "clear_costmaps": (0, 170, 215),
     "spin": (170, 80, 255),
     "spin_until_matched": (230, 60, 200),
+    "relocalize": (255, 60, 120),
     "wait": (255, 200, 0),
     "back_up": (255, 120, 0),
     "drive_on_heading": (180, 220, 40),

@@ -1,6 +1,7 @@
 """Issue 5's scenario benchmarks: source A's four trial sets and source C's greenhouse row run, per
 local controller (``navdeck bench scenarios.dwa``, ``scenarios.teb``, or one set, e.g.
-``scenarios.teb.person``). All in group ``slow``: a TEB set of 50 trials takes several CPU minutes.
+``scenarios.teb.person``), and the kidnapped robot (``scenarios.kidnap``, bench/scenarios/kidnap.py).
+All in group ``slow``: a TEB set of 50 trials takes several CPU minutes.
 
 Targets (issue 5): >= 98 % of goals reached with static obstacles (straight, turns, fixed obstacle,
 greenhouse rows), >= 95 % with a person stepping in (source A: 16/20), 0 collisions, for DWA and TEB.
@@ -9,11 +10,15 @@ The trial count is ``NAVDECK_SCENARIO_TRIALS`` (default 50), so a quick variant 
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 from collections.abc import Callable
 
+import numpy as np
+
 from bench.core import Benchmark, Figure
+from bench.scenarios.kidnap import KidnapSet, kidnap_trials
 from bench.scenarios.suite import (
     SetResult,
     TrialResult,
@@ -102,8 +107,55 @@ def _bench(controller: str, key: str) -> Callable[[], list[Figure]]:
     return run
 
 
+KIDNAP_TARGET_S = 30.0
+"""Issue 5: a robot teleported 5 m is relocalized and back on its way within 30 s."""
+
+
+def kidnap_figures(ks: KidnapSet) -> list[Figure]:
+    """Reached (for real: the true pose at the goal), time to relocalize and to be back on the way
+    (p50 and worst, against the 30 s target), collisions and speed."""
+    n = len(ks.trials)
+    back = np.array(ks.back_on_way())
+    reloc = np.array([math.inf if t.relocalized_s is None else t.relocalized_s for t in ks.trials])
+    in_time = int(np.count_nonzero(back <= KIDNAP_TARGET_S))
+    pct = 100.0 * in_time / max(1, n)
+    for t in ks.trials:
+        if not t.ok:
+            r = t.result.result
+            print(f"  failed: {t.result.name}: {r.outcome} {r.reason}, {t.final_error_m:.2f} m from the goal")
+    return [
+        Figure(
+            f"kidnapped 5 m: back on its way within 30 s ({in_time}/{n})", pct, "%", ">= 95 %", pct >= 95.0
+        ),
+        Figure(
+            f"kidnapped: goal reached, true pose at the goal ({ks.reached}/{n})",
+            100.0 * ks.reached / max(1, n),
+            "%",
+        ),
+        Figure("kidnapped: relocalized after, p50", float(np.median(reloc)), "s"),
+        Figure("kidnapped: relocalized after, worst", float(reloc.max()), "s"),
+        Figure(
+            "kidnapped: back on its way after, p50",
+            float(np.median(back)),
+            "s",
+            f"<= {KIDNAP_TARGET_S:g} s",
+            bool(np.median(back) <= KIDNAP_TARGET_S),
+        ),
+        Figure("kidnapped: back on its way after, worst", float(back.max()), "s"),
+        Figure("kidnapped: collisions", float(ks.runs.collisions), "count", "0", ks.runs.collisions == 0),
+        Figure("kidnapped: simulated / CPU time", ks.runs.sim_s / max(ks.runs.cpu_s, 1e-9), "x"),
+    ]
+
+
+def _kidnap_bench() -> list[Figure]:
+    return kidnap_figures(kidnap_trials(trial_count(), on_trial=_progress))
+
+
 BENCHMARKS = [
-    Benchmark(name=f"scenarios.{c}.{key}", run=_bench(c, key), group="slow")
-    for c in CONTROLLERS
-    for key in SETS
+    *(
+        Benchmark(name=f"scenarios.{c}.{key}", run=_bench(c, key), group="slow")
+        for c in CONTROLLERS
+        for key in SETS
+    ),
+    Benchmark(name="scenarios.kidnap", run=_kidnap_bench, group="slow"),
 ]

@@ -1,4 +1,4 @@
-"""Recovery behaviours (Nav2 ``nav2_behaviors``): spin, spin until matched, back up, drive on
+"""Recovery behaviours (Nav2 ``nav2_behaviors``): spin, spin until matched, relocalize, back up, drive on
 heading, wait and clear costmaps, each behind the :class:`Behavior` interface, plus a registry that
 builds them by name from plain parameters (what the recovery policy's configuration holds)."""
 
@@ -19,7 +19,14 @@ from nav.behaviors.base import (
 )
 from nav.behaviors.clear_costmap import ClearCostmap, ClearCostmapOptions
 from nav.behaviors.drive_on_heading import BackUp, BackUpOptions, DriveOnHeading, DriveOnHeadingOptions
-from nav.behaviors.spin import Spin, SpinOptions, SpinUntilMatched, SpinUntilMatchedOptions
+from nav.behaviors.spin import (
+    Relocalize,
+    RelocalizeOptions,
+    Spin,
+    SpinOptions,
+    SpinUntilMatched,
+    SpinUntilMatchedOptions,
+)
 from nav.behaviors.wait import Wait, WaitOptions
 
 #: name -> (options class, fixed option values, constructor)
@@ -29,6 +36,7 @@ REGISTRY: dict[str, tuple[type, dict[str, Any], Callable[[Any], Behavior]]] = {
     "clear_costmaps": (ClearCostmapOptions, {"costmap": "both"}, ClearCostmap),
     "spin": (SpinOptions, {}, Spin),
     "spin_until_matched": (SpinUntilMatchedOptions, {}, SpinUntilMatched),
+    "relocalize": (RelocalizeOptions, {}, Relocalize),
     "wait": (WaitOptions, {}, Wait),
     "back_up": (BackUpOptions, {}, BackUp),
     "drive_on_heading": (DriveOnHeadingOptions, {}, DriveOnHeading),
@@ -83,6 +91,8 @@ __all__ = [
     "ClearCostmapOptions",
     "DriveOnHeading",
     "DriveOnHeadingOptions",
+    "Relocalize",
+    "RelocalizeOptions",
     "Spin",
     "SpinOptions",
     "SpinUntilMatched",

@@ -96,6 +96,8 @@ class BehaviorContext:
     """Clears the local costmap's obstacle layer (Nav2 ``ClearEntireCostmap`` on local)."""
     clear_global_costmap: Callable[[], None] | None = None
     """Clears the global costmap's obstacle layer."""
+    reinitialize_localization: Callable[[], None] | None = None
+    """Restarts localization over the whole map (AMCL ``reinitialize_global_localization``)."""
 
 
 class Behavior(Protocol):

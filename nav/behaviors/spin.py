@@ -1,5 +1,7 @@
-"""Spin in place: by a given angle (Nav2 ``nav2_behaviors::Spin``), or until the scan matches the
-map again (source A's recovery when odometry drift makes the scan disagree with the map).
+"""Spin in place: by a given angle (Nav2 ``nav2_behaviors::Spin``), until the scan matches the
+map again (source A's recovery when odometry drift makes the scan disagree with the map), or after
+restarting localization from scratch (a kidnapped robot: AMCL's ``reinitialize_global_localization``
+service, then the same spin).
 
 Speed profile and collision check follow Nav2's ``Spin::onCycleUpdate``: the commanded rate is
 ``sqrt(2 * rotational_acc_lim * remaining_yaw)`` clamped to [min_rotational_vel,
@@ -72,14 +74,22 @@ class SpinUntilMatchedOptions(SpinOptions):
     time_allowance: float = 30.0
     """Give up after this long, s (a full turn at min_rotational_vel takes ~16 s)."""
     match_score_threshold: float = 0.6
-    """Stop (succeed) once the scan-to-map match score reaches this, in [0, 1]."""
+    """Stop (succeed) once the scan-to-map match score reaches this, in [0, 1]..."""
+    min_turn: float = 0.0
+    """...after turning at least this far (rad): one view can fit a look-alike place (the
+    apartment's rooms), and the turn shows the filter the rest of the room first."""
+
+    _owner = "spin_until_matched"
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not 0.0 <= self.match_score_threshold <= 1.0:
             raise BehaviorConfigError(
-                "spin_until_matched.match_score_threshold must be in [0, 1], "
-                f"got {self.match_score_threshold!r}"
+                f"{self._owner}.match_score_threshold must be in [0, 1], got {self.match_score_threshold!r}"
+            )
+        if not (math.isfinite(self.min_turn) and 0.0 <= self.min_turn <= abs(self.spin_dist)):
+            raise BehaviorConfigError(
+                f"{self._owner}.min_turn must be in [0, |spin_dist|], got {self.min_turn!r}"
             )
 
 
@@ -172,7 +182,7 @@ class SpinUntilMatched(Spin):
             self.best_score, self.best_angle = score, self.turned
         o = self.options
         assert isinstance(o, SpinUntilMatchedOptions)
-        if score >= o.match_score_threshold:
+        if score >= o.match_score_threshold and abs(self.turned) >= o.min_turn - 1e-3:
             return self._succeed()
         if abs(self.turned) >= abs(self.target) - 1e-3:
             return self._fail(
@@ -182,4 +192,48 @@ class SpinUntilMatched(Spin):
         return None
 
 
-__all__ = ["Spin", "SpinOptions", "SpinUntilMatched", "SpinUntilMatchedOptions"]
+@dataclass(frozen=True)
+class RelocalizeOptions(SpinUntilMatchedOptions):
+    """Options of "relocalize": up to two turns, matched only after a whole one."""
+
+    spin_dist: float = 4.0 * math.pi
+    """Largest turn, rad (two turns)."""
+    time_allowance: float = 45.0
+    """Give up after this long, s."""
+    match_score_threshold: float = 0.75
+    """Succeed once the match score reaches this (a localized robot: 0.77-1.0 in the scenario
+    sets)..."""
+    min_turn: float = 2.0 * math.pi
+    """...after a whole turn: the filter starts from the whole map, and a look-alike place wins
+    on one view more often than on all of them."""
+
+    _owner = "relocalize"
+
+
+class Relocalize(SpinUntilMatched):
+    """Restart localization over the whole map (``ctx.reinitialize_localization``, Nav2 amcl's
+    ``reinitialize_global_localization`` service), then turn in place until the scan matches the
+    map again. For a robot carried somewhere else (kidnapped): particles near the old estimate,
+    where spin_until_matched searches, cannot explain where it is now."""
+
+    name = "relocalize"
+
+    def __init__(self, options: RelocalizeOptions | None = None) -> None:
+        super().__init__(options or RelocalizeOptions())
+
+    def start(self, ctx: BehaviorContext) -> Status:
+        if ctx.reinitialize_localization is None:
+            self._begin(ctx)
+            return self._fail("relocalize: no way to reinitialize localization in the context")
+        ctx.reinitialize_localization()
+        return super().start(ctx)
+
+
+__all__ = [
+    "Relocalize",
+    "RelocalizeOptions",
+    "Spin",
+    "SpinOptions",
+    "SpinUntilMatched",
+    "SpinUntilMatchedOptions",
+]
