@@ -74,7 +74,10 @@ def test_mapping_session_end_to_end(api: httpx.Client, server: EmbeddedServer, t
     assert rt.session.modes.mode.value == "idle"
     loc = rt.features["localization"]
     deadline = time.monotonic() + 10
-    while loc.grid is not rt.features["mapping"].current_map() and time.monotonic() < deadline:
+    # hand_off sets the map, then the initial pose: wait for both (the test thread can run between)
+    while time.monotonic() < deadline and not (
+        loc.grid is rt.features["mapping"].current_map() and loc.localized
+    ):
         time.sleep(0.05)
     # the new map is handed to localization, the robot localized where SLAM left it
     assert loc.grid is rt.features["mapping"].current_map() and loc.localized
