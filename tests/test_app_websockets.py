@@ -163,4 +163,6 @@ def test_stalled_telemetry_client_is_dropped_without_slowing_others(tmp_path) ->
         assert len(received) >= 20
         rate = (len(received) - 1) / (received[-1] - received[0])
         assert rate >= 9.0, f"the healthy viewer got {rate:.1f} Hz while the other one stalled"
-        assert server.runtime.session.stats.summary()["lateness_p99_ms"] < 50.0
+        # Not a speed target (bench load.viewers has that): a loop that waited on the stalled
+        # socket would be late by the 2 s send timeout; a busy CI machine adds tens of ms.
+        assert server.runtime.session.stats.summary()["lateness_p99_ms"] < 500.0
