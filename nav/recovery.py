@@ -207,6 +207,7 @@ class RecoveryPolicy:
         self.active: Behavior | None = None
         self.active_trigger: Trigger | None = None
         self._cursor: dict[str, int] = {}
+        self._exhausted_reported = False  # the navigator asks every tick until it gives up
         self.last_status: Status = Status.SUCCEEDED
 
     # ------------------------------------------------------------------ state
@@ -229,6 +230,7 @@ class RecoveryPolicy:
         self.active = None
         self.active_trigger = None
         self._cursor.clear()
+        self._exhausted_reported = False
 
     def on_goal_reached(self) -> None:
         """Navigation succeeded: like Nav2's RecoveryNode, the retry count starts over."""
@@ -253,16 +255,18 @@ class RecoveryPolicy:
             )
             return None
         if self.exhausted:
-            self._emit(
-                RecoveryEvent(
-                    "exhausted",
-                    ctx.now,
-                    trigger.value,
-                    attempt=self.attempts,
-                    reason=f"number_of_retries ({self.options.number_of_retries}) spent",
-                    detail=detail,
+            if not self._exhausted_reported:  # one event per spent budget, not one per tick
+                self._exhausted_reported = True
+                self._emit(
+                    RecoveryEvent(
+                        "exhausted",
+                        ctx.now,
+                        trigger.value,
+                        attempt=self.attempts,
+                        reason=f"number_of_retries ({self.options.number_of_retries}) spent",
+                        detail=detail,
+                    )
                 )
-            )
             self.active = None
             return None
         steps = self.steps_for(trigger)

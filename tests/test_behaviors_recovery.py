@@ -76,6 +76,9 @@ def test_retry_budget_then_give_up() -> None:
     assert policy.on_failure(Trigger.NO_PROGRESS, ctx) is None
     assert policy.events[-1].kind == "exhausted"
     assert "number_of_retries" in policy.events[-1].reason
+    n_events = len(policy.events)
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx) is None  # the navigator asks every tick...
+    assert len(policy.events) == n_events  # ...and the run log says so once
     policy.on_goal_reached()
     b = policy.on_failure(Trigger.NO_PROGRESS, ctx)
     assert b is not None and b.name == "clear_local_costmap"

@@ -178,6 +178,17 @@ def test_relocalize_restarts_localization_then_turns_a_whole_turn() -> None:
     assert abs(b.turned) == pytest.approx(4 * math.pi, abs=0.06)
 
 
+def test_relocalize_turns_where_the_costmap_says_it_cannot() -> None:
+    # the lost robot's estimate sits on a wall: a Spin refuses, Relocalize (whose estimate is void
+    # after the reinitialize) turns and leaves stopping to the safety layer
+    walled = empty_map()
+    walled.costs[:] = LETHAL_OBSTACLE
+    assert Spin().start(ctx_at(costmap=walled)) is Status.FAILED
+    ctx = ctx_at(costmap=walled, scan_match_score=lambda: 0.9, reinitialize_localization=lambda: None)
+    b = Relocalize()
+    assert b.start(ctx) is Status.RUNNING and b.command.wz != 0.0
+
+
 def test_relocalize_needs_a_way_to_reinitialize() -> None:
     b = Relocalize()
     assert b.start(ctx_at(scan_match_score=lambda: 0.9)) is Status.FAILED

@@ -336,3 +336,16 @@ def test_cells_in_polygon_equals_point_in_polygon_of_cell_centres() -> None:
         inside = points_in_polygon(geo.cell_to_world(rr.ravel(), cc.ravel()), poly)
         want = set(zip(rr.ravel()[inside].tolist(), cc.ravel()[inside].tolist(), strict=True))
         assert set(zip(rows.tolist(), cols.tolist(), strict=True)) == want
+
+
+def test_in_mapped_obstacle_reads_the_static_map_only() -> None:
+    grid = _empty_map()
+    grid.data[:, 50] = 100  # a wall along x = 2.5 m
+    skid = ((0.12, 0.1), (-0.12, 0.1), (-0.12, -0.1), (0.12, -0.1))
+    cm = Costmap2D.from_map(grid, CostmapOptions(footprint=skid))
+    assert cm.in_mapped_obstacle(Pose2D(2.45, 1.0, 0.0))  # the front edge is in the wall
+    assert cm.in_mapped_obstacle(Pose2D(2.45, 1.0, math.pi / 2))  # and a side, turned
+    assert not cm.in_mapped_obstacle(Pose2D(2.3, 1.0, 0.0))  # inflated cost, but clear of it
+    cm.update(Pose2D(1.0, 1.0), np.array([[1.5, 1.0]]))  # a sensor mark is not the map
+    assert not cm.in_mapped_obstacle(Pose2D(1.5, 1.0, 0.0))
+    assert not Costmap2D(grid.geometry, CostmapOptions(footprint=skid)).in_mapped_obstacle(Pose2D(2.5, 1.0))

@@ -28,6 +28,17 @@ def test_kidnapped_robot_relocalizes_and_reaches_its_goal_within_30_s() -> None:
     assert ("localization_divergence", "spin_until_matched") in lost.recoveries, lost.recoveries
 
 
+def test_a_robot_refound_a_little_off_on_a_wall_recovers_as_lost() -> None:
+    # Trial 1: the filter re-finds the carried robot 0.36 m off with a good fit (0.88), its
+    # footprint on a wall of the map; nothing moves, so the filter never updates. Stuck there, the
+    # navigator blames localization (relocalize, which turns although the estimate is in a wall).
+    ks = kidnap_trials(2, only=frozenset({1}))
+    (t,) = ks.trials
+    assert t.ok, t
+    assert ("localization_divergence", "relocalize") in t.recoveries, t.recoveries
+    assert t.result.result.collisions == 0
+
+
 def test_a_safety_layer_that_keeps_stopping_the_robot_starts_the_safety_stop_recovery() -> None:
     # A safety layer configured far more cautious than the planner: a stop zone 2.2 m around the
     # footprint stops every forward command once the far wall is that close, 0.2 m before the

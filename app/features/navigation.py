@@ -474,7 +474,22 @@ class Navigation:
         if tick.state.value != "stuck" and mode == Mode.NAVIGATING:
             self._watch(session, now)
         if self.navigator.state.value == "stuck" and mode == Mode.NAVIGATING:
+            self._blame_localization()
             self._maybe_recover(self.navigator.stuck_reason, now)
+
+    def _blame_localization(self) -> None:
+        """Stuck with the footprint on a wall of the map itself: no robot can stand there, so the
+        estimate is wrong (a kidnapped robot the filter re-found a few decimetres off, fitting the
+        scan well enough for the divergence monitor). Recover as lost: clearing costmaps, spinning or
+        backing up all refuse or fail at a pose inside a wall."""
+        reason = self.navigator.stuck_reason
+        if reason in ("LocalizationDiverged", "SafetyStop") or self.localization.options.source != "amcl":
+            return
+        if self._global is not None and self._global.in_mapped_obstacle(self.session.pose):
+            self.navigator.halt(
+                "LocalizationDiverged",
+                f"localization lost: stuck ({reason}) with the footprint on a wall of the map",
+            )
 
     def _lost(self) -> bool:
         """Give the divergence monitor the localization updates since the last call (during

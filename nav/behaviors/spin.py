@@ -98,6 +98,9 @@ class Spin(TimedBehavior):
 
     name = "spin"
 
+    check_collisions = True
+    """Test the turn against the costmap at the estimated pose (Nav2 Spin::isCollisionFree)."""
+
     def __init__(self, options: SpinOptions | None = None) -> None:
         self.options = options or SpinOptions()
         super().__init__(self.options.time_allowance)
@@ -148,7 +151,7 @@ class Spin(TimedBehavior):
                 ctx.pose.theta + np.sign(wz) * dtheta,
             )
         )
-        if first_collision(ctx, poses) >= 0:
+        if self.check_collisions and first_collision(ctx, poses) >= 0:
             return self._fail("spin: collision ahead")
         self.command = Twist2D(0.0, 0.0, wz)
         return Status.RUNNING
@@ -217,6 +220,10 @@ class Relocalize(SpinUntilMatched):
     where spin_until_matched searches, cannot explain where it is now."""
 
     name = "relocalize"
+    check_collisions = False
+    """After the reinitialize the estimate says nothing about where the walls are (a lost robot's
+    estimate may even sit inside one); the safety layer in the driver path, on the real ranges,
+    still stops a turn that would touch something."""
 
     def __init__(self, options: RelocalizeOptions | None = None) -> None:
         super().__init__(options or RelocalizeOptions())

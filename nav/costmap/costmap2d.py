@@ -29,7 +29,16 @@ from nav.costmap.footprint import cells_in_polygon, circle_footprint, footprint_
 from nav.costmap.inflation import InflationOptions, cell_inflation_radius, inflate
 from nav.costmap.obstacle_layer import Bounds, ObstacleLayer, ObstacleLayerOptions, _union
 from nav.costmap.static_layer import StaticLayerOptions, sample_costs, static_costs
-from nav.types import FREE_SPACE, NO_INFORMATION, Costmap, GridGeometry, LaserScan, OccupancyGrid, Pose2D
+from nav.types import (
+    FREE_SPACE,
+    LETHAL_OBSTACLE,
+    NO_INFORMATION,
+    Costmap,
+    GridGeometry,
+    LaserScan,
+    OccupancyGrid,
+    Pose2D,
+)
 
 
 class CostmapError(ValueError):
@@ -292,6 +301,17 @@ class Costmap2D:
         self._refresh()
         fp = self.options.footprint_polygon() if footprint is None else footprint
         return footprint_cost(Costmap(self.geometry, self._master), poses, fp)
+
+    def in_mapped_obstacle(self, pose: Pose2D) -> bool:
+        """Does the footprint at ``pose`` cover a lethal cell of the static map alone (no sensor
+        marks, no inflation)? A robot cannot stand there: its pose estimate is wrong."""
+        if self._static_full is None or self._static_geometry is None:
+            return False
+        poly = self.options.footprint_polygon()
+        fp = circle_footprint(self.options.robot_radius) if poly is None else poly
+        static = Costmap(self._static_geometry, self._static_full)
+        cost = footprint_cost(static, np.array([[pose.x, pose.y, pose.theta]]), fp)
+        return bool(cost[0] == LETHAL_OBSTACLE)  # 255 (unknown, off the map) is not a wall
 
     @property
     def obstacle_costs(self) -> np.ndarray | None:
