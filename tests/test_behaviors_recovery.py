@@ -62,15 +62,24 @@ def test_default_order_is_nav2s_round_robin() -> None:
     assert events[0].as_dict()["trigger"] == "controller_failure"
 
 
+def run_attempts(
+    policy: RecoveryPolicy, trigger: Trigger, ctx, n: int, expect: Status | None = None
+) -> list[str]:
+    """``n`` failures with ``trigger``, each recovery run to its end; the behaviours' names."""
+    names = []
+    for _ in range(n):
+        b = policy.on_failure(trigger, ctx)
+        assert b is not None
+        names.append(b.name)
+        status = policy.run_to_end(ctx, lambda c, cmd: step(c, cmd))
+        assert expect is None or status is expect
+    return names
+
+
 def test_retry_budget_then_give_up() -> None:
     policy = RecoveryPolicy(RecoveryOptions(number_of_retries=6))
     ctx, _ = make_ctx()
-    names = []
-    for _ in range(6):
-        b = policy.on_failure(Trigger.NO_PROGRESS, ctx)
-        assert b is not None
-        names.append(b.name)
-        policy.run_to_end(ctx, lambda c, cmd: step(c, cmd))
+    names = run_attempts(policy, Trigger.NO_PROGRESS, ctx, 6)
     assert names[5] == "clear_local_costmap"  # wrapped around the round robin
     assert policy.exhausted and policy.retries_left == 0
     assert policy.on_failure(Trigger.NO_PROGRESS, ctx) is None
@@ -107,13 +116,7 @@ def test_localization_divergence_spins_until_matched_then_relocalizes() -> None:
 def test_safety_stop_waits_then_backs_away() -> None:
     policy = RecoveryPolicy()
     ctx, _ = make_ctx()
-    names = []
-    for _ in range(2):
-        b = policy.on_failure(Trigger.SAFETY_STOP, ctx)
-        assert b is not None
-        names.append(b.name)
-        assert policy.run_to_end(ctx, lambda c, cmd: step(c, cmd)) is Status.SUCCEEDED
-    assert names == ["wait", "back_up"]
+    assert run_attempts(policy, Trigger.SAFETY_STOP, ctx, 2, expect=Status.SUCCEEDED) == ["wait", "back_up"]
     assert ctx.pose.x == pytest.approx(-0.30, abs=0.02)
 
 
