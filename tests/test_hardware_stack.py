@@ -87,12 +87,23 @@ def pair(tmp_path: Path) -> Iterator[EmulatorPair]:
         yield p
 
 
-@pytest.fixture
-def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
-    with serve_in_thread(make_settings(tmp_path, robot=pair.url())) as srv:
+def _serve(tmp_path: Path, robot_url: str) -> Iterator[EmbeddedServer]:
+    with serve_in_thread(make_settings(tmp_path, robot=robot_url)) as srv:
         # the lidar answers GET_HEALTH and starts streaming within a second or two
         assert wait_for(lambda: srv.runtime.session.last_scan is not None, timeout=10.0)
         yield srv
+
+
+@pytest.fixture
+def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
+    yield from _serve(tmp_path, pair.url())
+
+
+@pytest.fixture
+def patient_server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
+    """A 1 s link watchdog: the emulator's threads, starved for 300 ms on a loaded CI machine,
+    must not fault the link before a test pulls the plug (a pulled port faults at once)."""
+    yield from _serve(tmp_path, pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0")
 
 
 def commands_seen(pair: EmulatorPair, kind: type) -> list:
@@ -142,7 +153,10 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
         assert pair.pump.truth_pose.distance_to(settled) > 0.03  # drives again after the reset
 
 
-def test_unplug_faults_and_stops_then_replug_recovers(pair: EmulatorPair, server: EmbeddedServer) -> None:
+def test_unplug_faults_and_stops_then_replug_recovers(
+    pair: EmulatorPair, patient_server: EmbeddedServer
+) -> None:
+    server = patient_server
     session = server.runtime.session
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         hello(ws)
@@ -152,8 +166,8 @@ def test_unplug_faults_and_stops_then_replug_recovers(pair: EmulatorPair, server
         t0 = time.monotonic()
         assert wait_for(lambda: session.modes.mode.value == "fault", timeout=3.0, period=0.005)
         elapsed = time.monotonic() - t0
-        # 300 ms link watchdog + one 50 ms control period, plus slack for a loaded machine
-        assert elapsed < 0.3 + session.period + SLACK, elapsed
+        # the port error, not the (1 s here) watchdog: one 50 ms control period plus slack
+        assert elapsed < session.period + SLACK, elapsed
         assert session.fault is not None and pair.base_path in session.fault
         assert session.link_state.value == "lost"
         assert wait_for(lambda: session.last_command.is_zero(), timeout=1.0)
