@@ -33,7 +33,7 @@ def serve_in_thread(
     (tests of stalled clients: the kernel's autotuned ~2 MB takes ~40 s of telemetry to fill)."""
     import uvicorn
 
-    from app.main import create_app
+    from app.main import UVICORN_OPTIONS, create_app
 
     runtime = runtime or Runtime.build(settings)
     app = create_app(runtime)
@@ -42,7 +42,7 @@ def serve_in_thread(
         sock.setsockopt(socket.SOL_SOCKET, socket.SO_SNDBUF, send_buffer)
     sock.bind(("127.0.0.1", 0))
     port = sock.getsockname()[1]
-    server = uvicorn.Server(uvicorn.Config(app, log_level="warning", ws_max_size=1 << 20, lifespan="on"))
+    server = uvicorn.Server(uvicorn.Config(app, lifespan="on", **UVICORN_OPTIONS))  # type: ignore[arg-type]
     thread = threading.Thread(target=server.run, kwargs={"sockets": [sock]}, name="uvicorn", daemon=True)
     thread.start()
     deadline = time.monotonic() + 30

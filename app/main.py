@@ -18,6 +18,16 @@ import app.api.routes as routes_pkg
 from app.runtime import Runtime
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
+
+UVICORN_OPTIONS: dict[str, object] = {
+    "log_level": "warning",
+    "ws_max_size": 1 << 20,  # a websocket message larger than 1 MiB is garbage: closed (1009)
+    # Idle keep-alive connections live longer than a reverse proxy's (nginx keepalive_timeout 60-75 s)
+    # and a poller's gaps: with uvicorn's 5 s a client reusing a connection the server was closing
+    # got a reset (6 of 113,784 polls in a 10-minute soak). Browsers retry those; proxies report 502.
+    "timeout_keep_alive": 75,
+}
+"""How navdeck runs uvicorn (``navdeck serve`` and the embedded test server alike)."""
 log = logging.getLogger("navdeck")
 
 

@@ -26,7 +26,7 @@ def run(args: argparse.Namespace) -> int:
     import uvicorn
 
     from app.drivers import DriverConfigError
-    from app.main import create_app
+    from app.main import UVICORN_OPTIONS, create_app
     from app.runtime import Runtime
     from app.settings import Settings
     from robot.profiles import ProfileError
@@ -63,5 +63,5 @@ def run(args: argparse.Namespace) -> int:
         flush=True,
     )
     app = create_app(runtime)
-    uvicorn.run(app, host=settings.host, port=settings.port, log_level="warning", ws_max_size=1 << 20)
+    uvicorn.run(app, host=settings.host, port=settings.port, **UVICORN_OPTIONS)  # type: ignore[arg-type]
     return 0

@@ -20,6 +20,8 @@ def _figures(report, *, soak: bool) -> list[Figure]:
 
     r: LoadReport = report
     p99, dropped = r.lateness_p99_ms, bool(r.stalled_dropped)
+    if r.poll_errors:
+        print(f"  REST poll errors by kind: {r.poll_error_kinds} of {r.poll_ok + r.poll_errors} requests")
     figs = [
         Figure(f"loop lateness p99 ({r.viewers} viewers)", p99, "ms", "< 10 ms", p99 < 10),
         Figure("loop lateness p50", r.lateness_p50_ms, "ms"),
@@ -29,6 +31,9 @@ def _figures(report, *, soak: bool) -> list[Figure]:
         Figure("REST poll latency p99", r.poll_latency_p99_ms, "ms"),
         Figure("REST poll errors", float(r.poll_errors), "", "0", r.poll_errors == 0),
         Figure("server CPU", r.cpu_pct, "% core"),
+        # one asyncio process plays 50 viewers and 50 pollers: near 100 % its own queueing is in the
+        # REST latency above
+        Figure("load generator CPU", r.client_cpu_pct, "% core"),
         Figure("server RSS (end)", r.rss_mb[-1][1] if r.rss_mb else float("nan"), "MB"),
         # The drop needs the kernel's socket buffers (~4 MB) full first: minutes at ~2 KB frames, so
         # only the soak holds it to a target.

@@ -23,6 +23,7 @@ import socket
 import statistics
 import tempfile
 import time
+from collections import Counter
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -64,6 +65,7 @@ class LoadReport:
     rss_mb: list[tuple[float, float]] = field(default_factory=list)  # (t since warm-up end, MB)
     stalled_dropped: bool | None = None
     server_alive: bool = True
+    poll_error_kinds: dict[str, int] = field(default_factory=dict)  # "HTTP 503" / exception name -> count
 
     @property
     def min_rate(self) -> float:
@@ -93,6 +95,7 @@ class LoadReport:
             "telemetry_mean_hz": round(statistics.fmean(self.rates_hz), 2) if self.rates_hz else 0.0,
             "poll_ok": self.poll_ok,
             "poll_errors": self.poll_errors,
+            "poll_error_kinds": self.poll_error_kinds,
             "poll_latency_p99_ms": round(self.poll_latency_p99_ms, 1),
             "loop_lateness_p50_ms": round(self.lateness_p50_ms, 2),
             "loop_lateness_p99_ms": round(self.lateness_p99_ms, 2),
@@ -143,7 +146,7 @@ async def _viewer(url: str, counts: list[int], i: int, stop: asyncio.Event) -> N
         return
 
 
-async def _poller(client, hz: float, stop: asyncio.Event, lat: list[float], errors: list[int]) -> None:
+async def _poller(client, hz: float, stop: asyncio.Event, lat: list[float], errors: Counter[str]) -> None:
     period = 1.0 / hz
     nxt = time.monotonic()
     while not stop.is_set():
@@ -153,9 +156,9 @@ async def _poller(client, hz: float, stop: asyncio.Event, lat: list[float], erro
             if r.status_code == 200:
                 lat.append((time.monotonic() - t0) * 1e3)
             else:
-                errors[0] += 1
-        except Exception:
-            errors[0] += 1
+                errors[f"HTTP {r.status_code}"] += 1
+        except Exception as exc:  # timeouts, refused or reset connections: kept by kind
+            errors[type(exc).__name__] += 1
         nxt += period
         await asyncio.sleep(max(0.0, nxt - time.monotonic()))
 
@@ -218,7 +221,7 @@ async def _drive_load(server: ServerProcess, opts: LoadOptions, progress=None) -
     stop = asyncio.Event()
     counts = [0] * opts.viewers
     lat: list[float] = []
-    errors = [0]
+    errors: Counter[str] = Counter()
     stalled = [open_stalled_client(server.port) for _ in range(opts.stalled_clients)]
     limits = httpx.Limits(max_connections=opts.viewers + 10, max_keepalive_connections=opts.viewers + 10)
     async with httpx.AsyncClient(base_url=server.base, timeout=10, limits=limits) as client:
@@ -233,7 +236,7 @@ async def _drive_load(server: ServerProcess, opts: LoadOptions, progress=None) -
         await asyncio.sleep(opts.warmup_s)
         c0 = list(counts)
         lat.clear()
-        errors[0] = 0
+        errors.clear()
         cpu0, t0, my0 = proc_cpu_s(server.pid), time.monotonic(), time.process_time()
         rss: list[tuple[float, float]] = [(0.0, proc_rss_mb(server.pid))]
         while (elapsed := time.monotonic() - t0) < opts.seconds:
@@ -259,7 +262,8 @@ async def _drive_load(server: ServerProcess, opts: LoadOptions, progress=None) -
         seconds=wall,
         rates_hz=rates,
         poll_ok=len(lat),
-        poll_errors=errors[0],
+        poll_errors=sum(errors.values()),
+        poll_error_kinds=dict(errors),
         poll_latency_p99_ms=lat_sorted[int(0.99 * (len(lat_sorted) - 1))] if lat_sorted else float("nan"),
         lateness_p50_ms=health.get("lateness_p50_ms", float("nan")),
         lateness_p99_ms=health.get("lateness_p99_ms", float("nan")),

@@ -147,8 +147,11 @@ def kidnap_figures(ks: KidnapSet) -> list[Figure]:
     ]
 
 
-def _kidnap_bench() -> list[Figure]:
-    return kidnap_figures(kidnap_trials(trial_count(), on_trial=_progress))
+def _kidnap_bench(controller: str) -> Callable[[], list[Figure]]:
+    def run() -> list[Figure]:
+        return kidnap_figures(kidnap_trials(trial_count(), on_trial=_progress, controller=controller))
+
+    return run
 
 
 BENCHMARKS = [
@@ -157,5 +160,6 @@ BENCHMARKS = [
         for c in CONTROLLERS
         for key in SETS
     ),
-    Benchmark(name="scenarios.kidnap", run=_kidnap_bench, group="slow"),
+    Benchmark(name="scenarios.kidnap", run=_kidnap_bench("dwa"), group="slow"),
+    Benchmark(name="scenarios.kidnap_teb", run=_kidnap_bench("teb"), group="slow"),
 ]
