@@ -8,6 +8,7 @@ import importlib
 import logging
 import pkgutil
 from pathlib import Path
+from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -19,7 +20,7 @@ from app.runtime import Runtime
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 
-UVICORN_OPTIONS: dict[str, object] = {
+UVICORN_OPTIONS: dict[str, Any] = {
     "log_level": "warning",
     "ws_max_size": 1 << 20,  # a websocket message larger than 1 MiB is garbage: closed (1009)
     # Idle keep-alive connections live longer than a reverse proxy's (nginx keepalive_timeout 60-75 s)

@@ -63,5 +63,5 @@ def run(args: argparse.Namespace) -> int:
         flush=True,
     )
     app = create_app(runtime)
-    uvicorn.run(app, host=settings.host, port=settings.port, **UVICORN_OPTIONS)  # type: ignore[arg-type]
+    uvicorn.run(app, host=settings.host, port=settings.port, **UVICORN_OPTIONS)
     return 0

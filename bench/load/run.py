@@ -53,7 +53,6 @@ class LoadReport:
     seconds: float
     rates_hz: list[float]
     poll_ok: int
-    poll_errors: int
     poll_latency_p99_ms: float
     lateness_p50_ms: float
     lateness_p99_ms: float
@@ -66,6 +65,10 @@ class LoadReport:
     stalled_dropped: bool | None = None
     server_alive: bool = True
     poll_error_kinds: dict[str, int] = field(default_factory=dict)  # "HTTP 503" / exception name -> count
+
+    @property
+    def poll_errors(self) -> int:
+        return sum(self.poll_error_kinds.values())
 
     @property
     def min_rate(self) -> float:
@@ -262,7 +265,6 @@ async def _drive_load(server: ServerProcess, opts: LoadOptions, progress=None) -
         seconds=wall,
         rates_hz=rates,
         poll_ok=len(lat),
-        poll_errors=sum(errors.values()),
         poll_error_kinds=dict(errors),
         poll_latency_p99_ms=lat_sorted[int(0.99 * (len(lat_sorted) - 1))] if lat_sorted else float("nan"),
         lateness_p50_ms=health.get("lateness_p50_ms", float("nan")),

@@ -75,6 +75,11 @@ class CostmapOptions:
         """The footprint as (K, 2), or None for a circular robot."""
         return np.asarray(self.footprint, dtype=float) if self.footprint else None
 
+    def outline(self) -> np.ndarray:
+        """The footprint polygon, or a 16-gon of ``robot_radius`` for a circular robot (K, 2)."""
+        poly = self.footprint_polygon()
+        return circle_footprint(self.robot_radius) if poly is None else poly
+
     @property
     def inscribed_radius(self) -> float:
         poly = self.footprint_polygon()
@@ -213,10 +218,7 @@ class Costmap2D:
         if o.obstacle_layer.footprint_clearing_enabled:
             # After marking, as Nav2's ObstacleLayer::updateCosts: returns off the robot's own body
             # (or noise inside it) never become obstacles.
-            poly = o.footprint_polygon()
-            if poly is None:
-                poly = circle_footprint(o.robot_radius)
-            rows, cols = cells_in_polygon(self.geometry, robot_pose.transform_points(poly))
+            rows, cols = cells_in_polygon(self.geometry, robot_pose.transform_points(o.outline()))
             self._dirty = _union(self._dirty, self._obstacles.clear_cells(rows, cols))
 
     def update_from_scan(
@@ -307,10 +309,8 @@ class Costmap2D:
         marks, no inflation)? A robot cannot stand there: its pose estimate is wrong."""
         if self._static_full is None or self._static_geometry is None:
             return False
-        poly = self.options.footprint_polygon()
-        fp = circle_footprint(self.options.robot_radius) if poly is None else poly
         static = Costmap(self._static_geometry, self._static_full)
-        cost = footprint_cost(static, np.array([[pose.x, pose.y, pose.theta]]), fp)
+        cost = footprint_cost(static, np.array([[pose.x, pose.y, pose.theta]]), self.options.outline())
         return bool(cost[0] == LETHAL_OBSTACLE)  # 255 (unknown, off the map) is not a wall
 
     @property
