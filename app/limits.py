@@ -12,6 +12,51 @@ import math
 from nav.types import Twist2D
 from robot.profiles import Limits
 
+SANITY_FACTOR = 2.0
+"""A command component beyond this many times the profile's limit is refused, not clamped: it is a
+mistake (mm/s sent as m/s, an overflow, a bug), and driving at top speed on it would be a guess."""
+
+
+class CommandRefused(ValueError):
+    """A velocity command beyond the sanity bound (``sanity_check``); the robot was stopped."""
+
+    def __init__(self, beyond: dict[str, tuple[float, float]]) -> None:
+        self.beyond = beyond  # component -> (value, bound)
+        parts = ", ".join(f"{k} = {v:.6g} (bound ±{b:.3g})" for k, (v, b) in beyond.items())
+        super().__init__(
+            f"command refused and robot stopped: {parts} is beyond {SANITY_FACTOR:g}x the profile's "
+            "limit (units are m/s and rad/s)"
+        )
+
+    def as_dict(self) -> dict:
+        return {
+            "error": str(self),
+            "status": 422,
+            "refused": {k: {"value": v, "bound": b} for k, (v, b) in self.beyond.items()},
+        }
+
+
+def sanity_bounds(limits: Limits, omni: bool) -> tuple[float, float, float]:
+    """(|vx|, |vy|, |wz|) beyond which a command is refused: ``SANITY_FACTOR`` x the top speed of each
+    component, forwards or backwards. A base without a y axis clamps vy to 0 (reported, as any clamp)
+    and refuses it only beyond the bound of its linear speed."""
+    top_x = max(limits.max_vel_x, abs(limits.min_vel_x))
+    top_y = limits.max_vel_y if omni and limits.max_vel_y > 0 else top_x
+    return SANITY_FACTOR * top_x, SANITY_FACTOR * top_y, SANITY_FACTOR * limits.max_vel_theta
+
+
+def sanity_check(cmd: Twist2D, limits: Limits, omni: bool) -> None:
+    """Raise ``CommandRefused`` naming every component beyond its sanity bound (NaN and inf included)."""
+    beyond = {
+        name: (value, bound)
+        for name, value, bound in zip(
+            ("linear.x", "linear.y", "angular.z"), _xyz(cmd), sanity_bounds(limits, omni), strict=True
+        )
+        if not abs(value) <= bound  # NaN compares false: refused too
+    }
+    if beyond:
+        raise CommandRefused(beyond)
+
 
 def clamp_speed(cmd: Twist2D, limits: Limits, omni: bool) -> tuple[Twist2D, tuple[str, ...]]:
     clamped: list[str] = []

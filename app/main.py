@@ -87,7 +87,7 @@ def _document_validation_errors(app: FastAPI) -> None:
 def create_app(runtime: Runtime) -> FastAPI:
     from app.auth import UserStore
     from app.hardening import HardeningMiddleware
-    from app.security import AuthContext, LeaseGuard, SecurityMiddleware, make_viz_authorize
+    from app.security import LEASE_RULES, AuthContext, LeaseGuard, SecurityMiddleware, make_viz_authorize
 
     settings = runtime.settings
     guard = LeaseGuard(runtime.lease, runtime.session, idle_s=settings.lease_idle_s)
@@ -109,6 +109,7 @@ def create_app(runtime: Runtime) -> FastAPI:
         title="navdeck",
         version="0.1.0",
         summary="Operator station and navigation server for small lidar robots",
+        description=LEASE_RULES,
         lifespan=lifespan,
     )
     app.state.runtime = runtime

@@ -3,7 +3,8 @@
 Other engineers add routes all the time; a per-route dependency would be forgotten on some of them, a
 middleware with a prefix table is not (OWASP: deny by default). Every write under ``/api`` needs the
 operator role unless the table says otherwise; the routes that move the robot also need the control
-lease (``LeaseGuard``); the e-stop is allowed for every signed-in user, always.
+lease (``LeaseGuard``), mode requests only need nobody else to hold it; the e-stop is allowed for every
+signed-in user, always. The lease rules are written once, in ``LEASE_RULES`` (also the API description).
 
 The same middleware resolves the caller for websockets (cookie on the upgrade request) and refuses
 the upgrade when sign-in is required and missing. Routes read the caller as ``principal_of(scope)``.
@@ -43,7 +44,8 @@ class Need(IntEnum):
     PUBLIC = 0  # anyone, signed in or not
     SIGNED_IN = 1  # any signed-in user (viewer or operator)
     OPERATOR = 2  # operator role
-    DRIVE = 3  # operator role and the control lease (taken if free)
+    UNCONTESTED = 3  # operator role, and nobody else holds the lease (a mode request: never takes it)
+    DRIVE = 4  # operator role and the control lease (taken if free)
 
 
 WRITE = frozenset({"POST", "PUT", "PATCH", "DELETE"})
@@ -70,9 +72,9 @@ POLICY: tuple[Rule, ...] = (
     Rule(WRITE, "/api/robot/estop", Need.SIGNED_IN),
     Rule(WRITE, "/api/control/release", Need.SIGNED_IN),
     Rule(WRITE, "/api/control", Need.OPERATOR),
-    Rule(WRITE, "/api/robot/mode", Need.DRIVE),
+    Rule(WRITE, "/api/robot/mode", Need.UNCONTESTED),
     Rule(WRITE, "/api/teleop", Need.DRIVE),
-    Rule(WRITE, "/api/mapping", Need.DRIVE),
+    Rule(WRITE, "/api/mapping", Need.UNCONTESTED),
     Rule(WRITE, "/api/localization", Need.DRIVE),
     Rule(WRITE, "/api/navigation", Need.DRIVE),
     Rule(WRITE, "/api/behaviors", Need.DRIVE),
@@ -123,14 +125,38 @@ def principal_of(scope: Scope) -> Principal | None:
     return state.get("principal")
 
 
+LEASE_RULES = """\
+**Control lease.** Many clients may watch; one client at a time holds control, and everyone sees who
+(`GET /api/control`, `control` in `GET /api/robot` and in every telemetry message).
+
+1. Calls that move the robot (`/api/navigation/*`, `/api/localization/*`, `/api/behaviors/*`, teleop on
+   `/ws/teleop`) take the lease when it is free and answer 409 while another client holds it.
+2. Mode requests (`POST /api/robot/mode`, `/api/mapping/*`) are not driving: they never take the lease,
+   and are refused (409) only while *another* client holds it.
+3. The holder is present while it has a `/ws/teleop` socket open, or for `lease_idle_s` (default 15 s)
+   after its last REST request. A holder without a socket yields to a `/ws/teleop` socket opened from
+   the same station (a cookie-less script's REST calls and its websocket); between two stations the
+   lease moves only by `take_over` (`POST /api/control/acquire {"take_over": true}` or the socket
+   message `{"type": "take_control"}`).
+4. When the lease ends (holder idle, its last socket closed, released, or taken over) only **teleop**
+   stops: it is the deadman (teleop commands are also zeroed 0.5 s after the last one). A mission
+   (navigation with its recoveries, global localization) and a mapping session keep running with no
+   client connected, until they finish or are stopped by `POST /api/navigation/cancel`, a mode request
+   or the e-stop.
+5. The e-stop (`POST /api/robot/estop`) is allowed for every signed-in user, always.
+"""
+
+
 class LeaseGuard:
-    """The control lease plus presence: who is connected, and what happens when the holder leaves.
+    """The control lease plus presence: who is connected, and what happens when the holder leaves
+    (``LEASE_RULES``).
 
     The holder is present while it has a teleop websocket open, or for ``idle_s`` after its last REST
-    request (scripts driving over REST). When it leaves, the lease frees and the robot stops: teleop is
-    zeroed and autonomous motion modes drop to IDLE (a mapping session stays, standing still)."""
+    request (scripts driving over REST). When it leaves, the lease frees and teleop stops (teleop zeroed,
+    TELEOP mode back to IDLE); a mission or mapping session keeps running: a robot must not drop its
+    mission because the operator's laptop went to sleep (issue 22)."""
 
-    STOP_MODES = frozenset({Mode.TELEOP, Mode.NAVIGATING, Mode.RECOVERING, Mode.LOCALIZING})
+    STOP_MODES = frozenset({Mode.TELEOP})  # the only mode the lease is a deadman for
 
     def __init__(self, lease: ControlLease, session: Any, idle_s: float = 15.0) -> None:
         self.lease = lease
@@ -217,6 +243,23 @@ class LeaseGuard:
             self.session.add_event("control", reason=f"{p.display} took control from {previous.name}")
         return ok
 
+    def acquire_for_socket(self, p: Principal) -> bool:
+        """A ``/ws/teleop`` socket opening: take a free lease, or the lease of this station's holder
+        when that holder has no socket (a script's REST call, then its websocket: one station)."""
+        raw = self._holder_raw()
+        absent_same_station = (
+            raw is not None and not self.connected(raw) and _station(raw) == _station(p.client_id)
+        )
+        return self.acquire(p, take_over=absent_same_station)
+
+    def uncontested_refusal(self, p: Principal) -> dict | None:
+        """None if nobody else holds the lease (a mode request may go ahead, taking nothing); else the
+        409 body."""
+        raw = self._holder_raw()
+        if raw is None or self.holds(p):
+            return None
+        return self._held_body()
+
     def release(self, p: Principal) -> bool:
         raw = self._holder_raw()
         if raw is None or not _same_station(raw, p.client_id):
@@ -228,6 +271,9 @@ class LeaseGuard:
         if self.holds(p) or self.acquire(p):
             self.touch(p.client_id)
             return None
+        return self._held_body()
+
+    def _held_body(self) -> dict:
         h = self.lease.holder
         who = h.name if h else "another client"
         return {
@@ -255,6 +301,11 @@ def _same_station(holder_id: str, client_id: str) -> bool:
     """Cookie-less API clients from one address (``addr:<ip>``) are one station with their websockets
     (``addr:<ip>#n``); browsers are told apart by their client cookie."""
     return holder_id == client_id or (client_id.startswith("addr:") and holder_id.startswith(client_id + "#"))
+
+
+def _station(client_id: str) -> str:
+    """The station of a client id: a cookie-less websocket ``addr:<ip>#n`` belongs to ``addr:<ip>``."""
+    return client_id.split("#", 1)[0] if client_id.startswith("addr:") else client_id
 
 
 def _cookies(scope: Scope) -> dict[str, str]:
@@ -385,6 +436,10 @@ class SecurityMiddleware:
             return 401, {"detail": "sign in required"}, [(b"www-authenticate", b'Cookie realm="navdeck"')]
         if need >= Need.OPERATOR and not p.can_drive:
             return 403, {"detail": f"{p.display} is a {p.role.value}: only operators may do this"}, []
+        if need == Need.UNCONTESTED:
+            body = self.guard.uncontested_refusal(p)
+            if body is not None:
+                return 409, body, []
         if need == Need.DRIVE:
             body = self.guard.drive_refusal(p)
             if body is not None:

@@ -25,7 +25,7 @@ import numpy as np
 
 from app.bus import Snapshot, SnapshotBus
 from app.fault_monitor import FaultMonitor, FaultMonitorOptions
-from app.limits import clamp_speed, limit_acceleration, ramp_duration
+from app.limits import CommandRefused, clamp_speed, limit_acceleration, ramp_duration, sanity_check
 from app.modes import Mode, ModeMachine
 from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
@@ -184,7 +184,30 @@ class Session:
     # ------------------------------------------------------------------ commands from other threads
     def set_teleop(self, cmd: Twist2D, client: str) -> None:
         """Store an operator's velocity command (teleop websocket). Applied while the mode allows it,
-        and sent at once (reflex path) so it reaches the driver without waiting for the next tick."""
+        and sent at once (reflex path) so it reaches the driver without waiting for the next tick.
+
+        A command beyond the sanity bound (``app.limits.sanity_check``: 2x the profile's limits) is
+        refused: the robot is stopped (teleop zeroed) and ``CommandRefused`` raised for the caller
+        to report. Commands a little over the limits are clamped later, and reported, as usual."""
+        self.check_teleop(cmd, client)
+        self._store_teleop(cmd, client)
+
+    def check_teleop(self, cmd: Twist2D, client: str) -> None:
+        """Raise ``CommandRefused`` for a command beyond the sanity bound, after stopping the robot
+        (callers may check before acting on a command in other ways, e.g. a mode switch)."""
+        try:
+            sanity_check(cmd, self.profile.limits, self.profile.is_omni)
+        except CommandRefused as exc:
+            self._store_teleop(ZERO_TWIST, client)
+            self.add_event("refused", what="teleop", reason=str(exc))
+            raise
+
+    @property
+    def teleop_command(self) -> Twist2D:
+        """The operator command held for the loop (before limits; zeroed by refusals and stops)."""
+        return self._teleop.command
+
+    def _store_teleop(self, cmd: Twist2D, client: str) -> None:
         with self._lock:
             self._teleop = TeleopState(cmd, self.clock.now(), client)
         if self._reflex_in_caller and self._thread is not None and not self.clock.is_virtual:
@@ -496,6 +519,10 @@ class Session:
         self.grid_version += 1
 
     def add_event(self, type_: str, **payload) -> None:
+        """Record an event stamped ``t`` = seconds since the session started, on the session clock.
+        The stamp is the session's own: a payload ``t`` (e.g. a RecoveryEvent's raw clock reading,
+        monotonic seconds since boot on a real clock) never replaces it (issue 17 item 4)."""
+        payload.pop("t", None)
         ev = {"t": round(self.clock.now() - self.started_at, 3), "type": type_, **payload}
         self.events.append(ev)
         for listener in list(self.event_listeners):

@@ -51,8 +51,9 @@ def test_teleop_drives_and_deadman_stops() -> None:
 def test_commands_beyond_limits_are_clamped() -> None:
     s = make_session()
     s.request_mode("teleop")
-    drive(s, Twist2D(3.0, 1.0, 9.0), 1.0)
     lim = s.profile.limits
+    # a little over the limits (within the 2x sanity bound): clamped and reported
+    drive(s, Twist2D(1.5 * lim.max_vel_x, 0.3, 1.5 * lim.max_vel_theta), 1.0)
     assert s.last_command.vx == pytest.approx(lim.max_vel_x)
     assert s.last_command.vy == 0.0 and s.last_command.wz == pytest.approx(lim.max_vel_theta)
     assert set(s.last_clamped) == {"linear.x", "linear.y", "angular.z"}
@@ -127,3 +128,29 @@ def test_real_time_loop_thread_asks_for_priority_and_workers_do_not_keep_it() ->
         assert futures[0].result(timeout=5.0) == process_nice
     finally:
         s.close()
+
+
+@pytest.mark.parametrize(
+    "cmd, component",
+    [
+        (Twist2D(1e308, 0.0, 0.0), "linear.x"),
+        (Twist2D(200.0, 0.0, 0.0), "linear.x"),  # mm/s sent as m/s
+        (Twist2D(-0.6, 0.0, 0.0), "linear.x"),
+        (Twist2D(0.1, 0.0, 2.5), "angular.z"),
+        (Twist2D(0.1, 5.0, 0.0), "linear.y"),
+        (Twist2D(float("nan"), 0.0, 0.0), "linear.x"),
+    ],
+)
+def test_command_beyond_sanity_bound_is_refused_and_stops(cmd: Twist2D, component: str) -> None:
+    from app.limits import CommandRefused
+
+    s = make_session()
+    s.request_mode("teleop")
+    drive(s, Twist2D(0.2, 0.0, 0.0), 1.0)
+    assert s.last_command.vx > 0.15
+    with pytest.raises(CommandRefused) as info:
+        s.set_teleop(cmd, "test")
+    assert list(info.value.beyond) == [component] and "refused" in str(info.value)
+    assert s.events[-1]["type"] == "refused" and component in s.events[-1]["reason"]
+    s.run_for(0.3)  # inside the 0.5 s deadman: only the refusal can have stopped it (2.5 m/s^2 ramp)
+    assert s.last_command.is_zero() and s.modes.mode == Mode.TELEOP

@@ -98,13 +98,14 @@ def test_clamp_reported_in_telemetry_and_rate(live_server) -> None:
         connect(f"{live_server.ws_url}/ws/telemetry?hz=15") as tel,
     ):
         hello(ws)
-        drive(ws, 0.6, vx=5.0)
-        ws.send(twist(vx=5.0))
+        over = 1.5 * limits.max_vel_x  # a little over the limit (inside the 2x sanity bound): clamped
+        drive(ws, 0.6, vx=over)
+        ws.send(twist(vx=over))
         msgs = []
         t0 = time.monotonic()
         while time.monotonic() - t0 < 1.0:
             msgs.append(json.loads(tel.recv(timeout=5)))
-        ws.send(twist(vx=5.0))
+        ws.send(twist(vx=over))
         assert len(msgs) >= 9, len(msgs)
         clamped = [m for m in msgs if "linear.x" in m["clamped"]]
         assert clamped, "clamp never reported"
@@ -113,6 +114,32 @@ def test_clamp_reported_in_telemetry_and_rate(live_server) -> None:
         assert last["scan"] is not None and len(last["scan"]["ranges"]) <= 180
         assert all(r is None or math.isfinite(r) for r in last["scan"]["ranges"])
         assert {"mode", "pose", "velocity", "health"} <= set(last)
+
+
+@pytest.mark.parametrize(
+    "bad", [{"linear": {"x": 1e308}}, {"linear": {"x": 200.0}}, {"angular": {"z": -40.0}}]
+)
+def test_absurd_command_is_refused_and_stops(live_server, bad) -> None:
+    """Beyond the sanity bound (2x the profile's limit): an error naming the component, and the robot
+    stops at once instead of driving at top speed; a sane command afterwards drives again."""
+    session = live_server.runtime.session
+    with connect(f"{live_server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        drive(ws, 0.5, vx=0.2)
+        assert session.last_command.vx > 0.1
+        ws.send(json.dumps(bad))
+        err = json.loads(ws.recv(timeout=5))
+        assert err["type"] == "error" and err["status"] == 422 and "refused" in err["error"]
+        component = next(iter(err["refused"]))
+        assert component in ("linear.x", "angular.z") and err["refused"][component]["bound"] > 0
+        assert session.teleop_command.is_zero()  # zeroed before the error was sent, not by the deadman
+        deadline = time.monotonic() + 5.0
+        while time.monotonic() < deadline and not session.last_command.is_zero():
+            time.sleep(0.02)
+        assert session.last_command.is_zero()
+        assert any(e["type"] == "refused" and e.get("what") == "teleop" for e in session.events)
+        drive(ws, 0.4, vx=0.2)
+        assert session.last_command.vx > 0.1  # still usable
 
 
 def test_estop_stops_robot_during_teleop(live_server) -> None:

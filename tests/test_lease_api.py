@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -45,9 +46,9 @@ def wait_for(pred, timeout: float = 5.0) -> bool:
 
 def test_policy_table_covers_motion_routes_and_defaults_to_operator() -> None:
     assert required("POST", "/api/robot/estop") == Need.SIGNED_IN
+    for path in ("/api/robot/mode", "/api/mapping/start"):
+        assert required("POST", path) == Need.UNCONTESTED, path  # a mode request is not driving
     for path in (
-        "/api/robot/mode",
-        "/api/mapping/start",
         "/api/navigation/goals",
         "/api/localization/global",
     ):
@@ -131,10 +132,102 @@ def test_second_socket_is_not_driving_and_can_take_control(server: EmbeddedServe
 
 def test_rest_only_holder_frees_after_idle(server: EmbeddedServer) -> None:
     a = browser(server)
-    assert a.post("/api/robot/mode", json={"mode": "teleop"}).status_code == 200  # takes the free lease
+    assert a.post("/api/control/acquire", json={}).status_code == 200
+    assert a.post("/api/robot/mode", json={"mode": "teleop"}).status_code == 200
     assert server.runtime.lease.holder is not None
     assert wait_for(lambda: server.runtime.lease.holder is None, timeout=5.0)
-    assert server.runtime.session.modes.mode.value == "idle"  # and the robot was stopped
+    assert server.runtime.session.modes.mode.value == "idle"  # and teleop was stopped (the deadman)
+
+
+# ------------------------------------------------------------------------------ issue 17 item 10
+@pytest.mark.parametrize(
+    "path, body", [("/api/robot/mode", {"mode": "teleop"}), ("/api/mapping/start", None)]
+)
+def test_mode_request_takes_no_lease_and_a_socket_script_drives(server: EmbeddedServer, path, body) -> None:
+    """curl's mode request, then a websocket script on the same machine: the script drives at once
+    (it was refused for the whole idle time-out while the cookie-less REST caller held the lease)."""
+    session = server.runtime.session
+    with httpx.Client(base_url=server.url, timeout=10) as curl:
+        r = curl.post(path, json=body) if body is not None else curl.post(path)
+        assert r.status_code == 200, r.text
+    assert server.runtime.lease.holder is None  # a mode request is not driving
+    with connect(f"{server.ws_url}/ws/teleop") as ws:
+        assert json.loads(ws.recv(timeout=5))["driving"] is True
+        end = time.monotonic() + 0.5
+        while time.monotonic() < end:
+            ws.send(twist(0.2))
+            time.sleep(0.05)
+        assert session.last_command.vx > 0.05
+        ws.send(twist(0.0))
+    assert wait_for(lambda: server.runtime.lease.holder is None)
+
+
+def test_rest_holder_yields_to_a_socket_from_its_own_station(server: EmbeddedServer) -> None:
+    session = server.runtime.session
+    with httpx.Client(base_url=server.url, timeout=10) as script:
+        assert script.post("/api/control/acquire", json={}).status_code == 200
+        assert script.post("/api/robot/mode", json={"mode": "teleop"}).status_code == 200
+        with connect(f"{server.ws_url}/ws/teleop") as ws:
+            hello = json.loads(ws.recv(timeout=5))
+            assert hello["driving"] is True and hello["control"]["holder"]["connected"] is True
+            ws.send(twist(0.2))
+            assert wait_for(lambda: session.last_command.vx > 0.05)
+            # the script's REST calls still count as the holder (one station)
+            assert script.get("/api/control").json()["you"]["holder"] is True
+            ws.send(twist(0.0))
+
+
+def test_protection_between_two_drivers_is_kept(server: EmbeddedServer) -> None:
+    """A browser holding control (REST or socket) is not displaced by a script's socket or mode request
+    from another station; a mode request is refused while someone else holds the lease."""
+    a = browser(server)
+    session = server.runtime.session
+    assert a.post("/api/control/acquire", json={}).status_code == 200
+    with httpx.Client(base_url=server.url, timeout=10) as script:
+        r = script.post("/api/robot/mode", json={"mode": "teleop"})
+        assert r.status_code == 409 and r.json()["control"]["holder"] is not None
+        with connect(f"{server.ws_url}/ws/teleop") as ws:
+            assert json.loads(ws.recv(timeout=5))["driving"] is False
+            ws.send(twist(0.2))
+            assert json.loads(ws.recv(timeout=5))["error"] == "another client is driving"
+        assert abs(session.last_command.vx) < 1e-9 and session.modes.mode.value == "idle"
+    assert a.get("/api/control").json()["you"]["holder"] is True
+    cookie = {"Cookie": f"navdeck_client={a.cookies['navdeck_client']}"}
+    with connect(f"{server.ws_url}/ws/teleop", additional_headers=cookie) as wa:
+        assert json.loads(wa.recv(timeout=5))["driving"] is True
+        with httpx.Client(base_url=server.url, timeout=10) as script:
+            assert script.post("/api/mapping/start").status_code == 409
+            with connect(f"{server.ws_url}/ws/teleop") as ws:
+                assert json.loads(ws.recv(timeout=5))["driving"] is False
+
+
+# ------------------------------------------------------------------------------ issue 22 item 1
+START = {"x": 3.0, "y": 3.5, "theta": 0.0}  # the apartment world's start pose
+
+
+def test_mission_survives_its_client_going_quiet(server: EmbeddedServer) -> None:
+    """Post goals, then only listen on /ws/telemetry, then disconnect entirely: the lease lapses (only
+    teleop has a deadman) and the mission still reaches its goal."""
+    rt = server.runtime
+    nav = rt.features["navigation"]
+    with httpx.Client(base_url=server.url, timeout=10) as script:
+        assert script.post("/api/localization/initial_pose", json=START).status_code == 200
+        r = script.post("/api/navigation/goals", json={"x": 3.0, "y": 1.2, "theta": -1.5708})
+        assert r.status_code == 200, r.text
+    assert rt.lease.holder is not None  # the goal took the lease
+    with connect(f"{server.ws_url}/ws/telemetry?scan=0") as tel:
+        # no REST call from here on: the REST-only holder lapses after lease_idle_s (0.6 s)
+        assert wait_for(lambda: rt.lease.holder is None, timeout=10.0)
+        lapsed = [e for e in rt.session.events if e["type"] == "control" and "idle" in e["reason"]]
+        assert lapsed, "the lease never lapsed"
+        msg = json.loads(tel.recv(timeout=5))
+        assert msg["control"]["holder"] is None
+        assert nav.state()["active"] is True and rt.session.modes.mode.value in ("navigating", "recovering")
+    # nobody connected at all now
+    assert wait_for(lambda: nav.state()["outcome"] is not None, timeout=120.0), nav.state()
+    assert nav.state()["outcome"]["kind"] == "reached", nav.state()
+    truth = rt.session.driver.truth_pose
+    assert math.hypot(truth.x - 3.0, truth.y - 1.2) < 0.35
 
 
 def test_cookieless_scripts_are_one_station(server: EmbeddedServer) -> None:

@@ -102,11 +102,23 @@ def test_unknown_run_is_404_everywhere(client) -> None:
     assert client.delete("/api/runs/9999").status_code == 404
 
 
-def test_recording_run_cannot_be_exported_or_deleted(client, runs) -> None:
+def test_recording_run_exports_as_partial_but_cannot_be_deleted(client, runs) -> None:
+    """Issue 17 item 11: a run still recording is exported as recorded so far, flagged partial."""
+    rid = runs["live"]
     for fmt in ("mcap", "json", "csv"):
-        r = client.get(f"/api/runs/{runs['live']}/export.{fmt}")
-        assert r.status_code == 409 and "still recording" in r.json()["detail"]
-    assert client.delete(f"/api/runs/{runs['live']}").status_code == 409
+        r = client.get(f"/api/runs/{rid}/export.{fmt}")
+        assert r.status_code == 200, (fmt, r.text[:200])
+        assert r.headers["x-run-partial"] == "true" and "-partial." in r.headers["content-disposition"]
+        done = client.get(f"/api/runs/{runs['tele1']}/export.{fmt}")
+        assert done.status_code == 200 and done.headers["x-run-partial"] == "false"
+    doc = client.get(f"/api/runs/{rid}/export.json").json()
+    assert doc["partial"] is True and doc["run"]["outcome"] == "recording" and len(doc["samples"]["t"]) == 20
+    assert client.get(f"/api/runs/{runs['tele1']}/export.json").json()["partial"] is False
+    reader = make_reader(io.BytesIO(client.get(f"/api/runs/{rid}/export.mcap").content))
+    (meta,) = [m for m in reader.iter_metadata() if m.name == "navdeck_run"]
+    assert meta.metadata["partial"] == "true" and meta.metadata["outcome"] == "recording"
+    assert float(meta.metadata["recorded_s"]) == pytest.approx(1.9)
+    assert client.delete(f"/api/runs/{rid}").status_code == 409
 
 
 def test_detail_trajectory_state_and_map(client, runs) -> None:
@@ -223,3 +235,36 @@ def test_replay_control_seek_and_bad_input(client, runs) -> None:
     st = client.post("/api/replay", json={"action": "pause"}).json()
     assert st["t"] >= 6.0 and not st["playing"]
     assert player.bus.latest.stamp > 4.0
+
+
+def test_export_right_after_mapping_stops_is_partial_then_whole(tmp_path) -> None:
+    """The seen case: export.mcap right after stopping mapping answered 409 for the idle grace (10 s).
+    Now it is the run so far, flagged partial; once the run has ended the same export is whole."""
+    import httpx
+    from conftest import make_settings
+
+    from app.embedded import serve_in_thread
+
+    with (
+        serve_in_thread(make_settings(tmp_path)) as server,
+        httpx.Client(base_url=server.url, timeout=30) as api,
+    ):
+        assert api.post("/api/mapping/start").status_code == 200
+        time.sleep(1.0)
+        assert api.post("/api/mapping/stop").status_code == 200
+        (run,) = api.get("/api/runs?kind=mapping").json()["items"]
+        assert run["outcome"] == "recording"  # the idle grace keeps it open
+        r = api.get(f"/api/runs/{run['id']}/export.mcap")
+        assert r.status_code == 200 and r.headers["x-run-partial"] == "true"
+        reader = make_reader(io.BytesIO(r.content))
+        (meta,) = [m for m in reader.iter_metadata() if m.name == "navdeck_run"]
+        assert meta.metadata["partial"] == "true" and float(meta.metadata["recorded_s"]) > 0.3
+        summary = reader.get_summary()
+        assert summary is not None
+        counts = {summary.channels[c].topic: n for c, n in summary.statistics.channel_message_counts.items()}
+        assert counts["/odom"] >= 3 and counts["/map"] >= 1, counts
+        # a new run kind ends this one: the export is whole now
+        assert api.post("/api/robot/mode", json={"mode": "teleop"}).status_code == 200
+        server.runtime.features["recording"].recorder.sync()
+        r = api.get(f"/api/runs/{run['id']}/export.mcap")
+        assert r.status_code == 200 and r.headers["x-run-partial"] == "false"

@@ -1,4 +1,5 @@
-"""Everything stored for one finished run, loaded once for an exporter."""
+"""Everything stored for one run, loaded once for an exporter (a run still recording is exported as
+recorded so far, flagged ``partial``)."""
 
 from __future__ import annotations
 
@@ -7,7 +8,7 @@ from datetime import datetime
 
 import numpy as np
 
-from app.runs.store import RunsStore, ensure_finished, utc_aware
+from app.runs.store import RunsStore, utc_aware
 from nav.types import LaserScan, OccupancyGrid
 
 
@@ -21,6 +22,11 @@ class RunData:
     grids: list[tuple[float, int, OccupancyGrid]]
     events: list[dict]
     goals: list[dict]
+
+    @property
+    def partial(self) -> bool:
+        """True while the run is still recording: the export holds what was recorded so far."""
+        return self.run["outcome"] == "recording"
 
     @property
     def start(self) -> datetime:
@@ -37,8 +43,8 @@ class RunData:
 
 
 def load_run(store: RunsStore, run_id: int) -> RunData:
-    """RunNotFound / RunStillRecording as ``ensure_finished``."""
-    run = ensure_finished(store, run_id)
+    """RunNotFound if there is no such run."""
+    run = store.run(run_id)
     samples, labels = store.samples(run_id)
     return RunData(
         run=run,

@@ -76,10 +76,11 @@ def write_mcap(data: RunData, out: io.BufferedIOBase | io.BytesIO) -> dict[str, 
         counts[topic] += 1
 
     run = data.run
-    writer.add_metadata(
-        "navdeck_run",
-        {k: str(run.get(k)) for k in ("id", "kind", "robot", "profile", "map_id", "outcome", "started_at")},
-    )
+    meta = {k: str(run.get(k)) for k in ("id", "kind", "robot", "profile", "map_id", "outcome", "started_at")}
+    # a run exported while it records: readers see it is partial and up to which run time
+    meta["partial"] = str(data.partial).lower()
+    meta["recorded_s"] = f"{float(data.samples['t'][-1]) if data.samples.size else 0.0:.3f}"
+    writer.add_metadata("navdeck_run", meta)
     t0 = data.stamp_ns(0.0)
     lx, ly, lyaw = data.laser_pose
     put("/tf_static", t0, {"transforms": [_tf(t0, "base_link", "laser", Pose2D(lx, ly, lyaw))]})

@@ -37,6 +37,7 @@ def samples_columns(samples: np.ndarray, labels: list[str], digits: int = 4) -> 
 def run_json(data: RunData, *, with_scans: bool = False) -> dict:
     """The whole run as one JSON document (scans optional: they dominate the size)."""
     doc: dict = {
+        "partial": data.partial,
         "run": data.run,
         "events": data.events,
         "goals": data.goals,

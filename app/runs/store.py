@@ -31,10 +31,6 @@ class RunNotFound(LookupError):
     """No run with that id."""
 
 
-class RunStillRecording(RuntimeError):
-    """The run is still being recorded (exports need a finished run)."""
-
-
 def utc_aware(dt: datetime | None = None) -> datetime:
     """A timezone-aware UTC datetime (naive input is taken as UTC)."""
     dt = dt or datetime.now(UTC)
@@ -440,11 +436,3 @@ class RunsStore:
                     ).one()
                 )
         return total
-
-
-def ensure_finished(store: RunsStore, run_id: int) -> dict:
-    """The run's row; RunNotFound / RunStillRecording for exports."""
-    run = store.run(run_id)
-    if run["outcome"] == "recording":
-        raise RunStillRecording(run_id)
-    return run

@@ -126,7 +126,12 @@ function renderNumbers(run) {
 function renderDownloads(run) {
   const p = $("#downloads");
   clear(p);
-  if (run.outcome === "recording") { p.textContent = "Downloads are available when the run has ended."; return; }
+  if (run.outcome === "recording") {
+    // exported as recorded so far (the response says X-Run-Partial: true); again when it has ended
+    const note = document.createElement("span");
+    note.textContent = "Still recording: a download holds the run so far (partial). ";
+    p.appendChild(note);
+  }
   for (const [fmtName, label] of [["mcap", "MCAP (Foxglove)"], ["json", "JSON"], ["csv", "CSV"]]) {
     const a = document.createElement("a");
     a.href = `/api/runs/${run.id}/export.${fmtName}`;

@@ -2,6 +2,7 @@
 
 Many people may watch; exactly one client holds control and everyone sees who. The dashboard holds it
 through its teleop websocket; scripts may hold it over REST (freed after ``Settings.lease_idle_s``).
+The rules, as the API description states them, are ``app.security.LEASE_RULES``.
 """
 
 from __future__ import annotations
@@ -10,7 +11,7 @@ from fastapi import APIRouter, Request
 from fastapi.responses import JSONResponse
 
 from app.api.deps import StrictModel
-from app.security import principal_of
+from app.security import LEASE_RULES, principal_of
 
 router = APIRouter(tags=["control"])
 
@@ -30,7 +31,7 @@ def _state(request: Request) -> dict:
     }
 
 
-@router.get("/api/control", summary="Who holds control, and whether it is you")
+@router.get("/api/control", summary="Who holds control, and whether it is you", description=LEASE_RULES)
 def get_control(request: Request) -> dict:
     return _state(request)
 
@@ -38,6 +39,7 @@ def get_control(request: Request) -> dict:
 @router.post(
     "/api/control/acquire",
     summary="Take control (``take_over`` takes it from the current holder)",
+    description=LEASE_RULES,
     responses={409: {"description": "someone else holds control"}, 403: {"description": "viewer"}},
 )
 def acquire(body: AcquireRequest, request: Request):
@@ -58,7 +60,11 @@ def acquire(body: AcquireRequest, request: Request):
     return _state(request)
 
 
-@router.post("/api/control/release", summary="Give control back (the robot stops)")
+@router.post(
+    "/api/control/release",
+    summary="Give control back (teleop stops; a running mission keeps going)",
+    description=LEASE_RULES,
+)
 def release(request: Request):
     guard = request.app.state.guard
     p = principal_of(request.scope)

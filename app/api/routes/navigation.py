@@ -55,8 +55,15 @@ def get_navigation(rt: RuntimeDep):
 @router.post(
     "/api/navigation/goals",
     summary="Navigate to a goal, or through a list of goals (waypoints); replaces the current request",
+    description="Takes the control lease if it is free. The mission then runs on its own: it is not "
+    "cancelled when the client goes quiet, closes its sockets or its lease ends (only teleop has a "
+    "deadman); it ends when reached or failed, by `POST /api/navigation/cancel`, a mode request or "
+    "the e-stop. See the lease rules in the API description.",
     responses={
-        409: {"description": "not localized, e-stop, fault, or the mode does not allow navigating"},
+        409: {
+            "description": "not localized, e-stop, fault, the mode does not allow navigating, or "
+            "another client holds control"
+        },
         422: {
             "description": "goal off the map, in an obstacle or its inscribed radius (+ nearest free "
             "pose), or an unknown or conflicting controller"

@@ -53,7 +53,9 @@ def get_robot(rt: RuntimeDep) -> dict:
 @router.post(
     "/api/robot/mode",
     summary="Request a mode (409 with the allowed modes when refused)",
-    responses={409: {"description": "transition refused"}},
+    description="A mode request is not driving: it never takes the control lease, and is refused "
+    "(409) only while another client holds it.",
+    responses={409: {"description": "transition refused, or another client holds control"}},
 )
 def set_mode(body: ModeRequest, rt: RuntimeDep):
     try:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 from datetime import date, datetime, time, timedelta
 from typing import Annotated, Literal
 
@@ -10,7 +11,9 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 
 from app.api.deps import RuntimeDep, StrictModel, get_runtime
-from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, RunStillRecording, utc_aware
+from app.export.data import RunData, load_run
+from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, utc_aware
+from app.runtime import Runtime
 
 router = APIRouter(tags=["runs"])
 
@@ -20,6 +23,18 @@ assert set(Kind.__args__) == set(KINDS) and set(Outcome.__args__) == set(OUTCOME
 
 NOT_FOUND = {404: {"description": "no such run"}}
 RECORDING = {409: {"description": "the run is still recording"}}
+PARTIAL_HEADER = "X-Run-Partial"
+PARTIAL = {
+    PARTIAL_HEADER: {
+        "description": "`true` when the run is still recording: the file holds what was recorded up to "
+        "the request (MCAP metadata `navdeck_run.partial`, JSON `partial`); `false` for an ended run",
+        "schema": {"type": "string", "enum": ["true", "false"]},
+    }
+}
+EXPORT_NOTE = (
+    "A run still recording is exported as recorded so far (flushed first), flagged partial in the "
+    f"`{PARTIAL_HEADER}` header; export again after it ends for the whole run."
+)
 
 
 def _recording(rt: RuntimeDep):
@@ -173,48 +188,40 @@ def state_at(
 @router.get(
     "/api/runs/{run_id}/export.mcap",
     summary="Download as MCAP with ROS 2 messages (Foxglove, ros2 bag)",
-    responses={**NOT_FOUND, **RECORDING, 200: {"content": {"application/octet-stream": {}}}},
+    description=EXPORT_NOTE,
+    responses={**NOT_FOUND, 200: {"content": {"application/octet-stream": {}}, "headers": PARTIAL}},
 )
-def export_mcap(run_id: int, store: StoreDep) -> Response:
+def export_mcap(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
     from app.export.mcap import mcap_bytes
 
-    data = _load(store, run_id)
-    return Response(
-        mcap_bytes(data),
-        media_type="application/octet-stream",
-        headers={"Content-Disposition": f'attachment; filename="navdeck-run-{run_id}.mcap"'},
-    )
+    data = _load(store, run_id, rt)
+    return Response(mcap_bytes(data), media_type="application/octet-stream", headers=_headers(data, "mcap"))
 
 
 @router.get(
     "/api/runs/{run_id}/export.json",
     summary="Download everything as JSON (samples as columns; scans with ?scans=true)",
-    responses={**NOT_FOUND, **RECORDING},
+    description=EXPORT_NOTE,
+    responses={**NOT_FOUND, 200: {"headers": PARTIAL}},
 )
-def export_json(run_id: int, store: StoreDep, scans: bool = False) -> JSONResponse:
+def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
     from app.export.tabular import run_json
 
-    data = _load(store, run_id)
-    return JSONResponse(
-        run_json(data, with_scans=scans),
-        headers={"Content-Disposition": f'attachment; filename="navdeck-run-{run_id}.json"'},
-    )
+    data = _load(store, run_id, rt)
+    return JSONResponse(run_json(data, with_scans=scans), headers=_headers(data, "json"))
 
 
 @router.get(
     "/api/runs/{run_id}/export.csv",
     summary="Download the trajectory samples as CSV",
-    responses={**NOT_FOUND, **RECORDING, 200: {"content": {"text/csv": {}}}},
+    description=EXPORT_NOTE,
+    responses={**NOT_FOUND, 200: {"content": {"text/csv": {}}, "headers": PARTIAL}},
 )
-def export_csv(run_id: int, store: StoreDep) -> Response:
+def export_csv(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
     from app.export.tabular import samples_csv
 
-    data = _load(store, run_id)
-    return Response(
-        samples_csv(data),
-        media_type="text/csv",
-        headers={"Content-Disposition": f'attachment; filename="navdeck-run-{run_id}.csv"'},
-    )
+    data = _load(store, run_id, rt)
+    return Response(samples_csv(data), media_type="text/csv", headers=_headers(data, "csv"))
 
 
 @router.delete("/api/runs/{run_id}", status_code=204, responses={**NOT_FOUND, **RECORDING})
@@ -226,15 +233,25 @@ def delete_run(run_id: int, store: StoreDep) -> Response:
     return Response(status_code=204)
 
 
-def _load(store: RunsStore, run_id: int):
-    from app.export.data import load_run
-
+def _load(store: RunsStore, run_id: int, rt: Runtime) -> RunData:
+    """The run's data for an exporter; the run being recorded is flushed first, so a partial export
+    holds everything up to this request (a starved recorder: what is stored, still flagged partial)."""
+    rec = rt.features.get("recording")
+    if rec is not None and rec.recorder.current_run_id == run_id:
+        with contextlib.suppress(TimeoutError):
+            rec.recorder.sync(timeout=5.0)
     try:
         return load_run(store, run_id)
     except RunNotFound:
         raise HTTPException(404, f"no run with id {run_id}") from None
-    except RunStillRecording:
-        raise HTTPException(409, f"run {run_id} is still recording; export it when it has ended") from None
+
+
+def _headers(data: RunData, ext: str) -> dict[str, str]:
+    name = f"navdeck-run-{data.run['id']}{'-partial' if data.partial else ''}.{ext}"
+    return {
+        "Content-Disposition": f'attachment; filename="{name}"',
+        PARTIAL_HEADER: str(data.partial).lower(),
+    }
 
 
 # ---------------------------------------------------------------------------------------------- replay

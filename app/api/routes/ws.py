@@ -14,6 +14,7 @@ from fastapi import APIRouter, WebSocket, WebSocketDisconnect
 from starlette.websockets import WebSocketState
 
 from app.auth import Principal, Role
+from app.limits import CommandRefused
 from app.modes import Mode, TransitionRefused
 from app.runtime import Runtime
 from app.security import principal_of
@@ -99,7 +100,7 @@ async def teleop(ws: WebSocket) -> None:
     name = p.username or (ws.query_params.get("name") or p.display)[:64]
     p = replace(p, username=p.username or name)
     guard.attach(client_id)
-    have_lease = p.can_drive and (guard.holds(p) or guard.acquire(p))
+    have_lease = p.can_drive and (guard.holds(p) or guard.acquire_for_socket(p))
     await _send(
         ws,
         {
@@ -172,6 +173,11 @@ async def teleop(ws: WebSocket) -> None:
                 await _send(
                     ws, {"type": "error", "error": "another client is driving", "control": guard.as_dict()}
                 )
+                continue
+            try:
+                session.check_teleop(cmd, client_id)  # before a mode switch: nothing happens for it
+            except CommandRefused as exc:  # beyond the sanity bound: the session stopped the robot
+                await _send(ws, {"type": "error", **exc.as_dict()})
                 continue
             mode = session.modes.mode
             if mode == Mode.IDLE and not cmd.is_zero():
