@@ -412,16 +412,22 @@ class SecurityMiddleware:
         # request of a cookie-less script is the same station ``addr:<ip>``.
         gets_cookie = _is_page(path) or path.startswith("/api/auth/")
         extra = self._cookie_headers(new_cid if gets_cookie else None)
-        if not extra:
-            await self.app(scope, receive, send)
-            return
+        try:
+            if not extra:
+                await self.app(scope, receive, send)
+                return
 
-        async def send_with_cookie(message: Message) -> None:
-            if message["type"] == "http.response.start":
-                message = {**message, "headers": list(message.get("headers", [])) + extra}
-            await send(message)
+            async def send_with_cookie(message: Message) -> None:
+                if message["type"] == "http.response.start":
+                    message = {**message, "headers": list(message.get("headers", [])) + extra}
+                await send(message)
 
-        await self.app(scope, receive, send_with_cookie)
+            await self.app(scope, receive, send_with_cookie)
+        finally:
+            # idle time counts from the answer too: a slow request (a goal on a busy machine) must not
+            # let the lease lapse while it is being handled
+            if principal is not None:
+                self.guard.touch(principal.client_id)
 
     def _refusal(
         self, need: Need, method: str, path: str, p: Principal | None, scope: Scope
