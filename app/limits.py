@@ -24,8 +24,8 @@ class CommandRefused(ValueError):
         self.beyond = beyond  # component -> (value, bound)
         parts = ", ".join(f"{k} = {v:.6g} (bound ±{b:.3g})" for k, (v, b) in beyond.items())
         super().__init__(
-            f"command refused and robot stopped: {parts} is beyond {SANITY_FACTOR:g}x the profile's "
-            "limit (units are m/s and rad/s)"
+            f"{parts} is beyond {SANITY_FACTOR:g}x the profile's limit (units are m/s and rad/s): "
+            "command refused, robot stopped"
         )
 
     def as_dict(self) -> dict:
