@@ -22,6 +22,17 @@ def drive(ws, seconds: float, **kw) -> None:
         time.sleep(0.1)
 
 
+def drive_until(ws, pred, timeout: float = 10.0) -> bool:
+    """Send 0.2 m/s every 50 ms until ``pred()`` (a loaded machine may take a while)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        ws.send(twist(vx=0.2))
+        if pred():
+            return True
+        time.sleep(0.05)
+    return False
+
+
 def hello(ws) -> dict:
     msg = json.loads(ws.recv(timeout=5))
     assert msg["type"] == "hello"
@@ -125,8 +136,7 @@ def test_absurd_command_is_refused_and_stops(live_server, bad) -> None:
     session = live_server.runtime.session
     with connect(f"{live_server.ws_url}/ws/teleop") as ws:
         hello(ws)
-        drive(ws, 0.5, vx=0.2)
-        assert session.last_command.vx > 0.1
+        assert drive_until(ws, lambda: session.last_command.vx > 0.1)
         ws.send(json.dumps(bad))
         err = json.loads(ws.recv(timeout=5))
         assert err["type"] == "error" and err["status"] == 422 and "refused" in err["error"]
@@ -138,8 +148,7 @@ def test_absurd_command_is_refused_and_stops(live_server, bad) -> None:
             time.sleep(0.02)
         assert session.last_command.is_zero()
         assert any(e["type"] == "refused" and e.get("what") == "teleop" for e in session.events)
-        drive(ws, 0.4, vx=0.2)
-        assert session.last_command.vx > 0.1  # still usable
+        assert drive_until(ws, lambda: session.last_command.vx > 0.1)  # still usable
 
 
 def test_estop_stops_robot_during_teleop(live_server) -> None:
