@@ -214,7 +214,8 @@ START = {"x": 3.0, "y": 3.5, "theta": 0.0}  # the apartment world's start pose
 
 def test_mission_survives_its_client_going_quiet(server: EmbeddedServer) -> None:
     """Post goals, then only listen on /ws/telemetry, then disconnect entirely: the lease lapses (only
-    teleop has a deadman) and the mission still reaches its goal."""
+    teleop has a deadman), a teleop socket closing frees it again, and the mission still reaches its
+    goal (it was cancelled 15 s after the last REST call)."""
     rt = server.runtime
     nav = rt.features["navigation"]
     with httpx.Client(base_url=server.url, timeout=10) as script:
@@ -243,6 +244,12 @@ def test_mission_survives_its_client_going_quiet(server: EmbeddedServer) -> None
             timeout=10.0,
         ), "the lease never lapsed after the goal"
         assert wait_for(lambda: bool(holders) and holders[-1] is None, timeout=10.0), holders[-5:]
+        assert nav.state()["active"] is True and rt.session.modes.mode.value in ("navigating", "recovering")
+        # a driving socket that takes the lease and goes away ends the lease the other way (detach)
+        with connect(f"{server.ws_url}/ws/teleop") as ws:
+            assert json.loads(ws.recv(timeout=5))["driving"] is True
+        assert wait_for(lambda: rt.lease.holder is None)
+        assert any(e["type"] == "control" and "disconnected" in e["reason"] for e in rt.session.events)
         assert nav.state()["active"] is True and rt.session.modes.mode.value in ("navigating", "recovering")
     finally:
         done.set()
