@@ -199,7 +199,13 @@ class Session:
             sanity_check(cmd, self.profile.limits, self.profile.is_omni)
         except CommandRefused as exc:
             self._store_teleop(ZERO_TWIST, client)
-            self.add_event("refused", what="teleop", reason=str(exc))
+            last = self.events[-1] if self.events else None
+            t = self.clock.now() - self.started_at
+            # a client repeating the mistake at 20 Hz gets an error per command, the run one event a second
+            if not (
+                last and last["type"] == "refused" and last.get("what") == "teleop" and t - last["t"] < 1.0
+            ):
+                self.add_event("refused", what="teleop", reason=str(exc))
             raise
 
     @property

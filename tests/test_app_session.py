@@ -154,3 +154,8 @@ def test_command_beyond_sanity_bound_is_refused_and_stops(cmd: Twist2D, componen
     assert s.events[-1]["type"] == "refused" and component in s.events[-1]["reason"]
     s.run_for(0.3)  # inside the 0.5 s deadman: only the refusal can have stopped it (2.5 m/s^2 ramp)
     assert s.last_command.is_zero() and s.modes.mode == Mode.TELEOP
+    for _ in range(10):  # repeated at 20 Hz: refused every time, one event for the run
+        with pytest.raises(CommandRefused):
+            s.set_teleop(cmd, "test")
+        s.run_for(s.period)
+    assert sum(e["type"] == "refused" for e in s.events) == 1
