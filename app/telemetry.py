@@ -61,7 +61,7 @@ def snapshot_dict(
         "health": snap.health,
         "goal": pose_dict(snap.goal) if snap.goal is not None else None,
     }
-    for key in ("navigation", "localization", "mapping"):
+    for key in ("navigation", "localization", "mapping", "contact"):
         if key in snap.extras:
             out[key] = snap.extras[key]
     if include_scan:

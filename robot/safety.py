@@ -15,7 +15,9 @@ Three zones, as collision_monitor's polygons, all derived from the robot's footp
 - **slowdown** (footprint + ``slowdown_margin``): readings there that the motion approaches scale
   the whole twist by ``slowdown_ratio``.
 - **approach**: the footprint is moved along the commanded twist (exact SE(2) arcs) every
-  ``simulation_time_step`` up to ``time_before_collision``; if readings would enter it at time
+  ``simulation_time_step`` (finer when a footprint point would move more than ``SWEEP_STEP``
+  between two poses: the swept footprint of a turn, not just its ends) up to
+  ``time_before_collision``; if readings would enter it at time
   t_c, the twist is scaled by t_c / time_before_collision so that the collision is never nearer
   than that horizon (collision_monitor's ``approach`` action).
 
@@ -40,6 +42,11 @@ from nav.types import ZERO_TWIST, Pose2D, Twist2D
 from robot.base import SensorFrame
 from robot.kinematics import integrate_twist, se2_exp
 from robot.profiles import RobotProfile
+
+SWEEP_STEP = 0.02
+"""m; the approach check moves no footprint point farther than this between two simulated poses (a
+0.51 x 0.43 m base turning at 1.8 rad/s moves a corner 6 cm per 0.1 s ``simulation_time_step``,
+enough to pass a post's few readings between two checked poses)."""
 
 COMMAND_GAP = 0.25
 """s; a longer pause between calls means the robot was stopped without the filter (see ``_ingest``)."""
@@ -173,7 +180,6 @@ class SafetyFilter:
         # ranges kept from a scan: also what the robot may drive into reach before the next scan
         # (0.5 s: scans come at 2 Hz or faster)
         self._scan_reach = self._reach + vmax * 0.5 + math.hypot(spec.mount_x, spec.mount_y)
-        self._k = np.arange(1, math.ceil(o.time_before_collision / o.simulation_time_step - 1e-9) + 1)
         ir = profile.ir
         self._ir_xy = np.array([[s.x, s.y] for s in ir], dtype=float).reshape(-1, 2)
         self._ir_dir = np.array([[math.cos(s.yaw), math.sin(s.yaw)] for s in ir], dtype=float).reshape(-1, 2)
@@ -335,6 +341,35 @@ class SafetyFilter:
         self.status = SafetyStatus(action, reason, nearest, near_src)
         return twist, reason
 
+    FREE_PROBES = (
+        ("forward", 1.0, 0.0),
+        ("back", -1.0, 0.0),
+        ("turn left", 0.0, 1.0),
+        ("turn right", 0.0, -1.0),
+    )
+    """(name, vx sign, wz sign) of the motions :meth:`free_motions` probes."""
+
+    def free_motions(self, now: float, distance: float = 0.05) -> dict[str, bool]:
+        """Per elementary motion (forward, back, turn left, turn right): whether the latest readings
+        leave room for it: the moved footprint takes in no reading within ``distance`` metres of
+        travel (a turn: the same arc length at the footprint's farthest point). What the dashboard
+        tells an operator whose robot is in contact."""
+        pts, w, _ = self._readings(now)
+        out = {}
+        if pts.shape[0] == 0:
+            return {name: True for name, _, _ in self.FREE_PROBES}
+        if self._circle is not None:
+            inside = np.hypot(pts[:, 0], pts[:, 1]) <= self._circle
+        else:
+            inside = _inside(pts, self._a, self._e)
+        horizon = self.options.time_before_collision
+        for name, sv, sw in self.FREE_PROBES:
+            v = distance / horizon
+            twist = Twist2D(sv * v, 0.0, sw * v / max(self._reach_fp, 1e-3))
+            t_c, _ = self._time_to_collision(twist, pts, w, inside)
+            out[name] = t_c is None
+        return out
+
     def _in_path(self, v: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """Per reading: whether a straight translation along ``v`` sweeps the footprint into it (it
         lies ahead, within the band the footprint covers across the direction of motion). A wall
@@ -382,7 +417,11 @@ class SafetyFilter:
         if w[cand].sum() < o.min_points:
             return None, -1
         p, wc = pts[cand], w[cand]
-        t = self._k * o.simulation_time_step
+        sweep = speed + abs(twist.wz) * (0.0 if self._circle is not None else self._reach_fp)
+        dt = o.simulation_time_step
+        if sweep * dt > SWEEP_STEP:
+            dt = SWEEP_STEP / sweep
+        t = np.arange(1, math.ceil(o.time_before_collision / dt - 1e-9) + 1) * dt
         ex, ey, th = se2_exp(twist.vx * t, twist.vy * t, twist.wz * t)  # future poses in base now
         dx, dy = p[None, :, 0] - ex[:, None], p[None, :, 1] - ey[:, None]
         if self._circle is not None:  # rotation does not move a circle

@@ -9,6 +9,14 @@ function eta(s) {
   return s >= 90 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${fmt(s, 0)} s`;
 }
 
+/** "IN CONTACT with obstacle: free: back, turn left" or "none (nearest 0.31 m)". */
+function contactText(c) {
+  if (!c) return "–";
+  if (!c.in_contact) return c.nearest_m === null ? "none" : `none (nearest ${fmt(c.nearest_m, 2)} m)`;
+  const free = Object.entries(c.free || {}).filter(([, ok]) => ok).map(([name]) => name);
+  return `IN CONTACT${c.with ? " with " + c.with : ""}: ` + (free.length ? `free: ${free.join(", ")}` : "no free motion");
+}
+
 function render(t) {
   state.mode = t.mode;
   state.allowed = t.allowed_modes || [];
@@ -62,6 +70,8 @@ function render(t) {
   const loop = h.loop || {};
   $("#st-loop").textContent = loop.lateness_p99_ms !== undefined
     ? `p99 late ${fmt(loop.lateness_p99_ms, 1)} ms, tick ${fmt(loop.tick_p50_ms, 1)} ms` : "–";
+  $("#st-contact").textContent = contactText(t.contact);
+  $("#st-contact").className = t.contact && t.contact.in_contact ? "bad-text" : "";
   const holder = t.control && t.control.holder;
   $("#st-control").textContent = holder ? `${holder.name}${state.driving ? " (you)" : ""}` : "nobody";
   const viewer = state.me && !state.me.can_drive;

@@ -6,9 +6,12 @@ service, then the same spin).
 Speed profile and collision check follow Nav2's ``Spin::onCycleUpdate``: the commanded rate is
 ``sqrt(2 * rotational_acc_lim * remaining_yaw)`` clamped to [min_rotational_vel,
 max_rotational_vel], so the robot decelerates into the target angle, and the rotation over the next
-``simulate_ahead_time`` seconds is footprint-checked against the local costmap every cycle (a
-square robot sweeps its corners when it turns). The angle turned is accumulated from wrapped yaw
-differences, so turns larger than pi are measured correctly.
+``simulate_ahead_time`` seconds is footprint-checked against the local costmap every cycle. Nav2
+checks a pose every 1 / cycle_frequency s; here the whole swept footprint is (poses close enough that
+no footprint point moves more than half a cell between them): a rectangular base's corner moves
+6 cm in 0.1 s at 1 rad/s (0.51 x 0.43 m base) and would pass a 5 cm post between two checked poses.
+The angle turned is accumulated from wrapped yaw differences, so turns larger than pi are measured
+correctly.
 """
 
 from __future__ import annotations
@@ -27,6 +30,7 @@ from nav.behaviors.base import (
     check_positive,
     first_collision,
 )
+from nav.control.footprint import swept_turn
 from nav.types import Twist2D, wrap_angle
 
 
@@ -140,19 +144,15 @@ class Spin(TimedBehavior):
         vmax = min(o.max_rotational_vel, ctx.limits.max_vel_theta)
         vel = min(max(math.sqrt(2.0 * o.rotational_acc_lim * remaining), o.min_rotational_vel), vmax)
         wz = math.copysign(vel, self.target)
-        # Nav2 Spin::isCollisionFree: poses every 1/cycle_frequency s over simulate_ahead_time,
-        # never beyond the target angle.
-        steps = np.arange(1, int(o.cycle_frequency * o.simulate_ahead_time) + 1) / o.cycle_frequency
-        dtheta = np.minimum(vel * steps, remaining)
-        poses = np.column_stack(
-            (
-                np.full(steps.shape, ctx.pose.x),
-                np.full(steps.shape, ctx.pose.y),
-                ctx.pose.theta + np.sign(wz) * dtheta,
-            )
-        )
-        if self.check_collisions and first_collision(ctx, poses) >= 0:
-            return self._fail("spin: collision ahead")
+        # Nav2 Spin::isCollisionFree over simulate_ahead_time, never beyond the target angle, on the
+        # swept footprint
+        if self.check_collisions and ctx.costmap is not None:
+            ahead = min(vel * max(o.simulate_ahead_time, 1.0 / o.cycle_frequency), remaining)
+            reach = float(np.max(np.hypot(*ctx.footprint.T))) if ctx.footprint is not None else 0.0
+            step = 0.5 * ctx.costmap.geometry.resolution
+            poses = swept_turn(ctx.pose.as_array(), math.copysign(ahead, wz), reach, step)[1:]
+            if first_collision(ctx, poses) >= 0:
+                return self._fail("spin: collision ahead")
         self.command = Twist2D(0.0, 0.0, wz)
         return Status.RUNNING
 

@@ -41,6 +41,7 @@ import numpy as np
 from scipy import ndimage
 
 from nav.control.errors import ControllerError, InvalidPath, NoValidControl, PatienceExceeded
+from nav.control.footprint import swept_poses, swept_turn
 from nav.control.teb_optim import (
     BandProblem,
     BandStructure,
@@ -518,7 +519,7 @@ class TebController:
         dfield = DistanceField(costmap, o.unknown_is_lethal)
         goal = self._path[-1]
         if pose.distance_to(Pose2D.from_array(goal)) <= o.xy_goal_tolerance:
-            return self._rotate_to_goal(pose, goal)
+            return self._rotate_to_goal(pose, goal, costmap)
         local = self._choose_goal(self._local_path(pose, costmap), dfield)
         at_final = bool(np.allclose(local[-1], goal))
         stop = at_final and not o.free_goal_vel
@@ -554,15 +555,11 @@ class TebController:
         self.last_debug = debug
         k = min(o.feasibility_check_no_poses, len(poses) - 1)
         if k > 0:
-            round_radius = None if o.footprint else o.robot_radius
-            hit = centre_collisions(
-                costmap, poses[1 : k + 1], self._polygon, round_radius, o.unknown_is_lethal
-            )
-            if hit.any():
+            # the footprint swept between the poses, not only at them: a turn's corners
+            hit = self._swept_collisions(costmap, poses[: k + 1])
+            if hit >= 0:
                 self._band = self._dts = None  # re-seed next cycle
-                return self._fail(
-                    f"band pose {int(np.argmax(hit)) + 1} collides", poses, dts, local, warm, debug
-                )
+                return self._fail(f"band pose {hit} collides", poses, dts, local, warm, debug)
         self._fail_cycles = 0
         vx, vy, wz = (float(v) for v in debug.velocities[0])
         if not o.holonomic:
@@ -593,15 +590,39 @@ class TebController:
             raise PatienceExceeded(f"no feasible band for {self._fail_cycles} cycles ({why})", {"teb": 1})
         raise NoValidControl(why, {"teb": 1})
 
-    def _rotate_to_goal(self, pose: Pose2D, goal: np.ndarray) -> tuple[Twist2D, TebDebug]:
-        """Inside ``xy_goal_tolerance``: stop translating and turn to the goal's heading."""
+    def _swept_collisions(self, costmap: Costmap, poses: np.ndarray) -> int:
+        """Index (1-based, into ``poses``) of the first segment end whose swept footprint (from the
+        previous pose) hits a lethal cell centre, or -1 when the whole sweep is free."""
+        o = self.options
+        step = 0.5 * costmap.geometry.resolution
+        round_radius = None if o.footprint else o.robot_radius
+        for i in range(1, len(poses)):
+            sweep = swept_poses(poses[i - 1 : i + 1], self._radius, step)[1:]
+            if centre_collisions(costmap, sweep, self._polygon, round_radius, o.unknown_is_lethal).any():
+                return i
+        return -1
+
+    def _rotate_to_goal(self, pose: Pose2D, goal: np.ndarray, costmap: Costmap) -> tuple[Twist2D, TebDebug]:
+        """Inside ``xy_goal_tolerance``: stop translating and turn to the goal's heading, the short
+        way round if its swept footprint is free, else the long way; raises ``NoValidControl`` when
+        both would sweep a corner through an obstacle (a rectangular base beside a post)."""
         o = self.options
         err = float(wrap_angle(goal[2] - pose.theta))
-        wz = (
-            0.0
-            if abs(err) <= o.yaw_goal_tolerance
-            else float(np.clip(1.5 * err, -o.max_vel_theta, o.max_vel_theta))
-        )
+        wz = 0.0
+        if abs(err) > o.yaw_goal_tolerance:
+            start = pose.as_array()
+            step = 0.5 * costmap.geometry.resolution
+            round_radius = None if o.footprint else o.robot_radius
+            for turn in (err, err - math.copysign(2.0 * math.pi, err)):
+                sweep = swept_turn(start, turn, self._radius, step)[1:]
+                if not centre_collisions(
+                    costmap, sweep, self._polygon, round_radius, o.unknown_is_lethal
+                ).any():
+                    wz = float(np.clip(1.5 * turn, -o.max_vel_theta, o.max_vel_theta))
+                    break
+            else:
+                why = "turning to the goal heading would sweep the footprint into an obstacle"
+                return self._fail(why, np.vstack((start, goal)), np.array([0.1]), goal[None, :], False)
         band = np.vstack((pose.as_array(), goal))
         debug = TebDebug(
             band=band, dts=np.array([max(abs(err) / o.max_vel_theta, 0.01)]), local_goal=goal.copy()

@@ -5,9 +5,17 @@ Each fixed substep (``SimOptions.physics_rate_hz``) the motor twist moves toward
 the profile's ``acc_lim_*`` / ``decel_lim_*``; the wheels turn by the inverse kinematics of that
 twist (what the encoders count); the body moves by the same twist perturbed by multiplicative slip
 noise (and, for skid steer, an effective track wider than the wheel track: skid-steer bases turn
-less than their encoders claim). The new pose is accepted only if every sample point of the
-footprint lies in a free cell; otherwise the body stays at the last free pose, the motors stall
-(velocity zero, wheels do not turn) and a collision is reported.
+less than their encoders claim). The new pose is accepted if every sample point of the
+footprint lies in a free cell. Otherwise a collision (contact) is reported and the body still takes
+the first of these motions that does not deepen the contact: the whole substep, its rotation alone,
+its translation alone (a base pushed against a post slides along it or turns away). "Deepen" is
+measured by the penetration depth, the deepest footprint sample's distance inside an obstacle (the
+exact distance to the nearest free cell, or into a person's disc): a motion is taken when its depth
+is no larger than the current pose's (0 for a robot that only touches). So a robot in contact can
+back out, turn away or slide along what it touches; one already overlapping something (a person
+stepped into it, a teleport, an obstacle added under it) can leave it; pushing on never gets further
+in. When no motion qualifies the body stays and the motors stall (velocity zero, wheels do not
+turn).
 """
 
 from __future__ import annotations
@@ -53,6 +61,10 @@ class SimOptions:
     footprint_interior_spacing: float = 0.05
     """Metres between interior sample points (no coarser than the map resolution, so a cell lying
     wholly inside the footprint, e.g. after a teleport, is caught too). Default 0.05."""
+    contact_skin: float = 0.002
+    """Metres of penetration, deepest and summed over the footprint samples, a body in contact may
+    take (a bumper's compliance). Zero tolerance makes thin pockets between posts where every
+    motion touches by a fraction of a millimetre: the robot is trapped. Default 0.002."""
 
     def __post_init__(self) -> None:
         positive = (
@@ -64,6 +76,8 @@ class SimOptions:
             "footprint_interior_spacing",
             "skid_track_factor",
         )
+        if not (math.isfinite(self.contact_skin) and self.contact_skin >= 0):
+            raise ValueError(f"SimOptions.contact_skin must be >= 0, got {self.contact_skin!r}")
         for name in positive:
             value = getattr(self, name)
             if not (math.isfinite(value) and value > 0):
@@ -91,6 +105,52 @@ def footprint_samples(
     grid = np.column_stack((gx.ravel(), gy.ravel()))
     interior = grid[points_in_polygon(grid, poly)] if grid.size else np.zeros((0, 2))
     return np.vstack([*edges, interior])
+
+
+_DEPTH_WINDOW = 4
+"""Cells around a penetrating sample searched for free space; deeper reads this many cells."""
+
+
+def static_depth(world: World, xy: np.ndarray) -> np.ndarray:
+    """Penetration (m) of each of the (N, 2) world points into the world's static obstacle cells:
+    for a point in an occupied cell, the exact distance to the nearest free cell (taken as a
+    square), at most ``_DEPTH_WINDOW`` cells; 0 for points in free cells."""
+    g = world.geometry
+    local = g.origin.inverse().transform_points(np.asarray(xy, dtype=float).reshape(-1, 2)) / g.resolution
+    out = np.zeros(len(local))
+    cells = np.floor(local).astype(np.int64)
+    rows, cols = cells[:, 1], cells[:, 0]
+    inside = g.in_bounds(rows, cols)
+    occ = world.static_occupied
+    hit = np.zeros(len(local), dtype=bool)
+    hit[inside] = occ[rows[inside], cols[inside]]
+    if not hit.any():
+        return out
+    k = _DEPTH_WINDOW
+    r0, c0 = int(rows[hit].min()) - k, int(cols[hit].min()) - k
+    r1, c1 = int(rows[hit].max()) + k + 1, int(cols[hit].max()) + k + 1
+    window = np.zeros((r1 - r0, c1 - c0), dtype=bool)  # off the grid counts as free
+    rr0, cc0, rr1, cc1 = max(r0, 0), max(c0, 0), min(r1, g.height), min(c1, g.width)
+    window[rr0 - r0 : rr1 - r0, cc0 - c0 : cc1 - c0] = occ[rr0:rr1, cc0:cc1]
+    fr, fc = np.nonzero(~window)
+    if len(fr) == 0:
+        out[hit] = k * g.resolution
+        return out
+    u, v = local[hit, 0:1], local[hit, 1:2]  # (H, 1) continuous column, row
+    fc, fr = fc[None, :] + c0, fr[None, :] + r0  # (1, F) free cells: squares [c, c+1) x [r, r+1)
+    dx = np.maximum(np.maximum(fc - u, u - (fc + 1)), 0.0)
+    dy = np.maximum(np.maximum(fr - v, v - (fr + 1)), 0.0)
+    out[hit] = np.minimum(np.sqrt(dx * dx + dy * dy).min(axis=1), k) * g.resolution
+    return out
+
+
+def people_depth(world: World, xy: np.ndarray) -> np.ndarray:
+    """Penetration (m) of each of the (N, 2) world points into the people's discs (0 outside)."""
+    crowd = world.people
+    if not len(crowd):
+        return np.zeros(len(xy))
+    d = np.hypot(xy[:, None, 0] - crowd.xy[None, :, 0], xy[:, None, 1] - crowd.xy[None, :, 1])
+    return np.maximum((crowd.radius[None, :] - d).max(axis=1), 0.0)
 
 
 class NormalStream:
@@ -159,6 +219,30 @@ class SimBody:
             return True
         return False
 
+    def penetration(self, world: World, pose: Pose2D) -> tuple[float, float]:
+        """(deepest, total) penetration (m) of the footprint samples at ``pose`` into obstacles and
+        people; (0, 0) when free."""
+        pts = pose.transform_points(self.samples)
+        d = np.maximum(static_depth(world, pts), people_depth(world, pts))
+        return float(d.max()), float(d.sum())
+
+    def _contact_motion(self, world: World, body: Twist2D, dt: float) -> tuple[Pose2D, Twist2D] | None:
+        """After the whole substep ``body`` touched something: the first of (the whole motion, its
+        rotation alone, its translation alone) that does not press further in than the current pose,
+        as (pose, the part of ``body`` taken); None if all of them would."""
+        deep0, total0 = self.penetration(world, self.pose)
+        skin = self.options.contact_skin
+        deep_ok, total_ok = max(deep0, skin) + 1e-12, max(total0, skin) + 1e-12
+        parts = (body, Twist2D(0.0, 0.0, body.wz), Twist2D(body.vx, body.vy, 0.0))
+        for k, part in enumerate(parts):
+            if k and part.is_zero():
+                continue
+            pose = integrate_twist(self.pose, part, dt)
+            deep, total = self.penetration(world, pose)
+            if deep <= deep_ok and total <= total_ok:
+                return pose, part
+        return None
+
     def step(self, world: World, target: Twist2D, dt: float) -> bool:
         """Advance one substep toward ``target``; returns True on a collision.
 
@@ -202,11 +286,24 @@ class SimBody:
         turn = 1.0 if omni else 1.0 / self.options.skid_track_factor
         body = Twist2D(vx * (1 + nx), vy * (1 + ny), wz * turn * (1 + nw))
         candidate = integrate_twist(self.pose, body, dt)
-        if self.collides(world, candidate):
-            self.velocity = Twist2D()
-            self.last_accel = (-v.vx / dt, -v.vy / dt)
-            self.true_yaw_rate = 0.0
-            return True
+        contact = self.collides(world, candidate)
+        if contact:
+            hit = self.last_hit
+            taken = self._contact_motion(world, body, dt)
+            self.last_hit = hit
+            if taken is None:
+                self.velocity = Twist2D()
+                self.last_accel = (-v.vx / dt, -v.vy / dt)
+                self.true_yaw_rate = 0.0
+                self._rest = None
+                return True
+            candidate, part = taken
+            # the motors keep turning only for the part of the motion the contact lets through
+            scale_v = 0.0 if part.vx == 0.0 and part.vy == 0.0 else 1.0
+            scale_w = 0.0 if part.wz == 0.0 else 1.0
+            motor = Twist2D(vx * scale_v, vy * scale_v, wz * scale_w)
+            body = part
+            vx, vy, wz = motor.vx, motor.vy, motor.wz
         # plain floats: four numpy ops per substep cost more than the arithmetic (same IEEE results)
         k = dt / self.profile.wheel_radius
         self._wheel = [a + v * k for a, v in zip(self._wheel, self._rim_speeds(motor), strict=True)]
@@ -215,8 +312,8 @@ class SimBody:
         self.pose = candidate
         self.true_yaw_rate = body.wz
         at_rest = vx == 0.0 and vy == 0.0 and wz == 0.0 and v.vx == 0.0 and v.vy == 0.0 and v.wz == 0.0
-        self._rest = (candidate, world.version) if at_rest else None
-        return False
+        self._rest = (candidate, world.version) if at_rest and not contact else None
+        return contact
 
     @property
     def wheel_angle(self) -> np.ndarray:
