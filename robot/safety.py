@@ -349,6 +349,17 @@ class SafetyFilter:
     )
     """(name, vx sign, wz sign) of the motions :meth:`free_motions` probes."""
 
+    def nearest_reading(self, now: float) -> float:
+        """Distance (m) from the footprint to the nearest of the latest readings (0 inside it, inf
+        with none near), whatever the last command was."""
+        pts, _, _ = self._readings(now)
+        if pts.shape[0] == 0:
+            return math.inf
+        if self._circle is not None:
+            return float(max(np.hypot(pts[:, 0], pts[:, 1]).min() - self._circle, 0.0))
+        dist, _ = _boundary_distance(pts, self._a, self._e, self._inv)
+        return float(np.where(_inside(pts, self._a, self._e), 0.0, dist).min())
+
     def free_motions(self, now: float, distance: float = 0.05) -> dict[str, bool]:
         """Per elementary motion (forward, back, turn left, turn right): whether the latest readings
         leave room for it: the moved footprint takes in no reading within ``distance`` metres of

@@ -83,7 +83,7 @@ def test_map_published_about_once_a_second() -> None:
         drive.session.close()
 
 
-def test_mode_rules_and_leaving_mapping_by_estop() -> None:
+def test_mode_rules_and_an_estop_pauses_mapping() -> None:
     drive = build("apartment", APARTMENT_START)
     try:
         s, m = drive.session, drive.mapping
@@ -95,16 +95,18 @@ def test_mode_rules_and_leaving_mapping_by_estop() -> None:
         s.estop("test")
         s.run_for(0.1)
         assert not m.running  # the tick noticed the mode change and finished the session
+        nodes = m.slam.num_nodes
         m.current_map()  # the map is kept
         with pytest.raises(TransitionRefused):
             m.start()  # ESTOP only leaves through reset
         s.reset()
-        m.start()
-        assert m.running and m.generation == 2
+        m.start()  # after E-STOP + reset, mapping resumes the interrupted session's map
+        assert m.running and m.generation == 1 and m.slam.num_nodes >= nodes
+        assert [e["status"] for e in s.events if e["type"] == "mapping"][-1] == "resumed"
         m.stop()
-        s.request_mode("mapping")  # MAPPING through the plain mode API also maps, from scratch
+        s.request_mode("mapping")  # MAPPING through the plain mode API maps from scratch after a stop
         s.run_for(0.1)
-        assert m.running and m.generation == 3
+        assert m.running and m.generation == 2
     finally:
         drive.session.close()
 

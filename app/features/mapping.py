@@ -12,6 +12,12 @@ its own thread fed through a one-slot queue: the control loop only drops the new
 waits. On a :class:`~robot.clock.VirtualClock` (simulated benchmarks and tests, no wall-clock deadline)
 everything runs inline in the tick, which makes a simulated mapping session deterministic.
 
+E-stop and faults. Leaving MAPPING by an e-stop or a fault (not by ``stop``) interrupts the session:
+its map is finished and kept for saving as after a stop, and the next start (after the reset)
+resumes it, the same SLAM and map frame, instead of beginning a new map over it (issue 16: an
+operator who hit E-STOP in a tight spot lost the map when mapping again). ``stop`` then ``start``
+begins a new map.
+
 Frames (REP-105). A mapping session starts a new ``map`` frame at the robot's pose when it starts, as
 slam_toolbox does; ``session.map_to_odom`` follows SLAM while mapping and keeps its last value after.
 """
@@ -134,6 +140,7 @@ class Mapping:
         self.run_id_source: Callable[[], int | None] | None = None  # the recorder's current run
         self.run_id: int | None = None  # the recorded run of the last mapping session
         self.saved_map_id: int | None = None  # stored from this session's map (same map frame)
+        self.interrupted = False  # left MAPPING by an e-stop or a fault: the next start resumes
         # Called (on a worker) with the final map when a session ends: the runtime makes it the
         # active map for localization, so the pose stays in the new map frame after mapping.
         self.on_finished: Callable[[OccupancyGrid], None] | None = None
@@ -157,6 +164,13 @@ class Mapping:
     def _begin(self) -> None:
         from nav.slam.system import GraphSlam
 
+        if self.interrupted and self.slam is not None:
+            with self._lock:
+                self.interrupted = False
+                self.running = True
+                self._last_scan = None
+            self.session.add_event("mapping", status="resumed", nodes=self.slam.num_nodes)
+            return
         with self._lock:
             self.slam = GraphSlam(self.slam_options)
             self.running = True
@@ -179,6 +193,7 @@ class Mapping:
             if self.session.modes.mode == Mode.MAPPING:
                 self.session.modes.request(Mode.IDLE, "mapping stopped")
             self._finish()
+            self.interrupted = False
 
     def _finish(self) -> None:
         with self._lock:
@@ -229,6 +244,7 @@ class Mapping:
                 mode = session.modes.mode
                 if self.running and mode != Mode.MAPPING:  # e-stop, fault, a plain mode request
                     self._finish()
+                    self.interrupted = mode in (Mode.ESTOP, Mode.FAULT)
                 elif not self.running and mode == Mode.MAPPING:  # entered through /api/mode
                     self._begin()
             finally:

@@ -58,7 +58,7 @@ class SafetyFeature:
         base does not say), the nearest reading's distance to the footprint, and which elementary
         motions the readings leave room for (``free``: forward / back / turn left / turn right)."""
         in_contact = now - self._contact_at <= CONTACT_HOLD
-        nearest = self.filter.status.nearest
+        nearest = self.filter.nearest_reading(now)
         return {
             "in_contact": in_contact,
             "with": self._contact_with if in_contact else None,

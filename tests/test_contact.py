@@ -1,0 +1,266 @@
+"""Issue 16 "never trapped" and "zero contact while moving": a robot in contact can always leave (the
+simulator takes any motion that does not deepen the contact, the safety layer lets it back out or
+turn away, teleop and navigation get it out of the tightest spot of each stock world), and every
+rotation checks the swept footprint, not only its end pose."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from conftest import make_settings
+
+from app.commands.sim_nav import build_sim_stack
+from nav.behaviors.base import BehaviorContext, Status
+from nav.behaviors.spin import Spin, SpinOptions
+from nav.control.errors import NoValidControl
+from nav.control.footprint import swept_poses, swept_turn
+from nav.control.teb import TebController, centre_collisions
+from nav.control.teb_options import TebOptions
+from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, LaserScan, Path, Pose2D, Twist2D
+from robot.base import SensorFrame
+from robot.clock import VirtualClock
+from robot.profiles import load_profile
+from robot.safety import SafetyFilter
+from robot.sim import SimDriver, SimOptions, World
+
+QUIET = SimOptions(slip_noise_std=0.0, lidar_noise=False, gyro_noise=False, ir_stop=False)
+# A 0.51 x 0.43 m rectangular base (issue 16's cylinder-field robot)
+BIG = np.array([[0.255, 0.215], [-0.255, 0.215], [-0.255, -0.215], [0.255, -0.215]])
+
+
+def step(driver: SimDriver, clock: VirtualClock, cmd: Twist2D, seconds: float) -> int:
+    """Command ``cmd`` for ``seconds`` (20 Hz); returns how many frames reported a contact."""
+    hits = 0
+    for _ in range(round(seconds / 0.05)):
+        driver.command(cmd)
+        clock.advance(0.05)
+        hits += driver.read().collision
+    return hits
+
+
+def moved(a: Pose2D, b: Pose2D) -> float:
+    return math.hypot(a.x - b.x, a.y - b.y) + abs(math.remainder(a.theta - b.theta, 2 * math.pi)) * 0.12
+
+
+# ------------------------------------------------------------------------------------------ physics
+def test_a_base_pushing_an_arc_into_a_wall_still_turns_away() -> None:
+    """A front corner against a wall, forward + turn away: the whole motion presses in, its rotation
+    alone frees the corner: the body turns (the old physics rejected the whole substep and the robot
+    stood, pushing)."""
+    clock = VirtualClock()
+    start = Pose2D(3.4, 1.5, 0.5)
+    d = SimDriver(World.box(4.0, 3.0), load_profile("skid4"), clock, seed=0, start_pose=start, options=QUIET)
+    assert step(d, clock, Twist2D(0.2, 0.0, 0.0), 6.0) > 0  # front-right corner at the wall x = 3.9
+    before = d.truth_pose
+    hits = step(d, clock, Twist2D(0.2, 0.0, -0.8), 1.0)
+    after = d.truth_pose
+    assert hits > 0  # the push still reports a contact...
+    assert before.theta - after.theta > 0.3  # ...but the base turned away from the wall
+    assert d.body.penetration(d.world, after)[0] <= d.options.contact_skin + 1e-9  # never further in
+
+
+def test_an_overlapping_base_can_leave_but_never_goes_deeper() -> None:
+    """A post appears under the front of the footprint (an obstacle set down on the robot): pushing
+    on does not move it deeper, backing out does."""
+    clock = VirtualClock()
+    world = World.box(4.0, 3.0)
+    d = SimDriver(
+        world, load_profile("skid4"), clock, seed=0, start_pose=Pose2D(2.0, 1.5, 0.0), options=QUIET
+    )
+    world.add_polygon(np.array([[2.08, 1.45], [2.16, 1.45], [2.16, 1.55], [2.08, 1.55]]))
+    deep0, _ = d.body.penetration(world, d.truth_pose)
+    assert deep0 > 0.0
+    step(d, clock, Twist2D(0.2, 0.0, 0.0), 1.0)
+    assert d.body.penetration(world, d.truth_pose)[0] <= deep0 + 1e-9
+    step(d, clock, Twist2D(-0.15, 0.0, 0.0), 2.0)
+    assert d.truth_pose.x < 2.0 - 0.1  # backed out
+    assert not d.body.collides(world, d.truth_pose)
+
+
+# ------------------------------------------------------------------------------- swept rotations
+def big_skid():
+    return dataclasses.replace(load_profile("skid4"), footprint=tuple(map(tuple, BIG.tolist())))
+
+
+def post_scan(stamp: float, radius: float, angle: float, beams: int = 3600) -> LaserScan:
+    """A scan (laser at base_link) with four returns from a thin post at (radius, angle)."""
+    r = np.full(beams, np.inf)
+    inc = 2 * math.pi / beams
+    k = round((angle + math.pi) / inc)
+    r[k - 2 : k + 2] = radius
+    return LaserScan(stamp, -math.pi, inc, r, 0.15, 6.0)
+
+
+def test_safety_limits_a_turn_whose_corner_would_sweep_through_a_post() -> None:
+    """0.51 x 0.43 m base, a thin post 0.31 m from base_link at 55 deg, outside the footprint now and
+    after each 0.1 s of a 1.8 rad/s turn (0.18 rad steps), inside it between 11 and 20 deg of
+    turn: the swept check limits the turn; checking every 0.1 s only, it passed unchanged."""
+    f = SafetyFilter(big_skid())
+    a = math.radians(55.0)
+    for k in (0, 1, 2):  # the post is outside the footprint at 0, 0.18 and 0.36 rad of turn
+        body = np.array([0.31 * math.cos(a - 0.18 * k), 0.31 * math.sin(a - 0.18 * k)])
+        assert abs(body[0]) > 0.255 or abs(body[1]) > 0.215
+    out, reason = f(Twist2D(0.0, 0.0, 1.8), SensorFrame(stamp=0.0, scan=post_scan(0.0, 0.31, a)))
+    assert out.wz < 0.5 * 1.8 and reason is not None and reason.startswith("approach")
+    away, _ = f(Twist2D(0.0, 0.0, -1.8), SensorFrame(stamp=0.05))
+    # turning the near corner away: only the far corner, 0.7 s of turn later, limits it
+    assert away.wz <= -1.0
+
+
+def post_costmap(cell_xy: tuple[float, float]) -> Costmap:
+    g = GridGeometry(0.05, 60, 60)
+    costs = np.zeros((60, 60), dtype=np.uint8)
+    rows, cols = g.world_to_cell(np.array([cell_xy]))
+    costs[rows[0], cols[0]] = LETHAL_OBSTACLE
+    return Costmap(g, costs)
+
+
+def test_teb_refuses_a_rotation_to_the_goal_heading_that_sweeps_a_post() -> None:
+    """Inside the goal's xy tolerance, TEB turns in place; a post inside the corner's sweep but
+    outside the footprint at the start and goal headings: neither way round is free, so it
+    refuses (it used to command the turn, checking nothing)."""
+    teb = TebController(TebOptions(footprint=tuple(map(tuple, BIG.tolist()))))
+    costmap = post_costmap((1.5 + 0.31 * math.cos(math.radians(55)), 1.5 + 0.31 * math.sin(math.radians(55))))
+    start, goal = np.array([1.5, 1.5, 0.0]), np.array([1.5, 1.5, math.pi / 2])
+    assert not centre_collisions(costmap, np.vstack((start, goal)), BIG).any()  # both ends free
+    assert centre_collisions(costmap, swept_turn(start, math.pi / 2, 0.34, 0.025), BIG).any()
+    teb.set_path(Path(np.vstack((start, goal))))
+    with pytest.raises(NoValidControl, match="sweep"):
+        teb.compute(Pose2D(*start), Twist2D(), costmap)
+    # without the post the same turn is commanded
+    teb.reset()
+    teb.set_path(Path(np.vstack((start, goal))))
+    cmd, _ = teb.compute(Pose2D(*start), Twist2D(), Costmap(costmap.geometry, np.zeros((60, 60), np.uint8)))
+    assert cmd.wz > 0.0
+
+
+def test_spin_checks_the_swept_footprint() -> None:
+    """A spin whose corner would sweep through the post fails before it starts turning; the
+    other way round (the corner moving away) it turns."""
+    costmap = post_costmap((1.5 + 0.31 * math.cos(math.radians(55)), 1.5 + 0.31 * math.sin(math.radians(55))))
+    ctx = BehaviorContext(now=0.0, pose=Pose2D(1.5, 1.5, 0.0), costmap=costmap, footprint=BIG)
+    ccw = Spin(SpinOptions(spin_dist=0.5))
+    assert ccw.start(ctx) == Status.FAILED and "collision" in ccw.reason
+    cw = Spin(SpinOptions(spin_dist=-0.5))
+    assert cw.start(ctx) == Status.RUNNING and cw.command.wz < 0.0
+
+
+def test_swept_poses_bound_the_motion_between_samples() -> None:
+    poses = np.array([[0.0, 0.0, 3.0], [0.1, 0.0, -3.0]])  # a short hop across the +-pi seam
+    sweep = swept_poses(poses, reach=0.3, step=0.01)
+    d = np.diff(sweep, axis=0)
+    dth = np.abs((d[:, 2] + math.pi) % (2 * math.pi) - math.pi)
+    assert np.all(np.hypot(d[:, 0], d[:, 1]) + 0.3 * dth <= 0.01 + 1e-12)
+    assert np.allclose(sweep[0], poses[0]) and np.allclose(sweep[-1, :2], poses[1, :2])
+    assert math.isclose(math.remainder(sweep[-1, 2] - poses[1, 2], 2 * math.pi), 0.0, abs_tol=1e-12)
+
+
+# --------------------------------------------------------------------- the tightest spot of each world
+# (world, pose to drive in from, command that presses into the spot)
+TIGHT_SPOTS = {
+    "apartment": (Pose2D(3.3, 1.72, 0.0), Twist2D(0.2, 0.0, 0.35)),  # between the chair's legs
+    "office": (Pose2D(2.3, 9.6, -1.92), Twist2D(0.2, 0.0, 0.0)),  # a doorframe's corner
+    "greenhouse": (Pose2D(8.0, 6.2, -1.1), Twist2D(0.2, 0.0, 0.0)),  # nose into a plant row
+}
+ESCAPES = {
+    "back": Twist2D(-0.15, 0.0, 0.0),
+    "turn left": Twist2D(0.0, 0.0, 0.8),
+    "turn right": Twist2D(0.0, 0.0, -0.8),
+    "forward": Twist2D(0.15, 0.0, 0.0),
+}
+
+
+def press_into(session, world_name: str) -> Pose2D:
+    """Teleop into the spot with the safety layer and the base's IR stop off (an obstacle the
+    sensors do not see, or an operator's override), until the base reports contact for 2 s."""
+    start, push = TIGHT_SPOTS[world_name]
+    session.driver.options = dataclasses.replace(session.driver.options, ir_stop=False)
+    session.driver.teleport(start)
+    safety = session.safety
+
+    def override(cmd: Twist2D, frame: SensorFrame) -> tuple[Twist2D, None]:
+        safety(cmd, frame)  # the filter still sees every frame, its verdict is ignored
+        return cmd, None
+
+    session.safety = override
+    contact = 0
+    for _ in range(round(20.0 / session.period)):
+        session.set_teleop(push, "test")
+        before = session.collisions
+        session.run_for(session.period)
+        contact = contact + 1 if session.collisions > before else 0
+        if contact * session.period >= 2.0:
+            break
+    session.safety = safety
+    assert contact * session.period >= 2.0, "never reached contact"
+    return session.driver.truth_pose
+
+
+@pytest.mark.parametrize("world_name", sorted(TIGHT_SPOTS))
+def test_teleop_gets_out_of_the_tightest_spot_following_the_dashboard(tmp_path, world_name: str) -> None:
+    """Pressed into the spot, the dashboard says "in contact" and which way is free; an operator who
+    holds the first free motion for half a second at a time, safety layer on, gets the robot out."""
+    from app.features import safety
+    from app.runtime import Runtime
+    from app.telemetry import snapshot_dict
+
+    rt = Runtime.build(make_settings(tmp_path, world=world_name), clock=VirtualClock())
+    try:
+        feature = safety.setup(rt)
+        s = rt.session
+        s.request_mode("teleop")
+        stuck = press_into(s, world_name)
+        tele = snapshot_dict(s.bus.latest, "skid4")["contact"]
+        assert tele["in_contact"] and tele["with"] == "obstacle" and tele["nearest_m"] is not None
+        assert any(tele["free"].values()), tele  # some way out is shown
+        t0 = s.clock.now()
+        while moved(s.driver.truth_pose, stuck) < 0.15 and s.clock.now() - t0 < 30.0:
+            free = feature.contact(s.clock.now())["free"] or {"back": True}
+            key = next(k for k in ESCAPES if free.get(k))
+            for _ in range(round(0.5 / s.period)):
+                s.set_teleop(ESCAPES[key], "test")
+                s.run_for(s.period)
+        assert moved(s.driver.truth_pose, stuck) >= 0.15, f"still stuck after {s.clock.now() - t0:.1f} s"
+        s.set_teleop(Twist2D(), "test")
+        s.run_for(1.0)
+        assert not snapshot_dict(s.bus.latest, "skid4")["contact"]["in_contact"]
+    finally:
+        rt.close()
+
+
+NAV_OUT = {
+    "apartment": Pose2D(3.0, 1.0, math.pi),
+    "office": Pose2D(4.0, 10.0, 0.0),
+    "greenhouse": Pose2D(10.0, 6.2, 0.0),
+}
+
+
+@pytest.mark.parametrize("world_name", sorted(TIGHT_SPOTS))
+def test_navigation_gets_out_of_the_tightest_spot(world_name: str) -> None:
+    """Pressed into the spot, a goal 1.5-2 m away (DWA, localization from the simulator's truth, the
+    safety layer on, as the server wires it) is reached without the robot staying in contact."""
+    world = World.stock(world_name)
+    stack = build_sim_stack(
+        world.grid, world, TIGHT_SPOTS[world_name][0], localization="truth", controller="dwa"
+    )
+    s = stack.session
+    try:
+        s.safety = SafetyFilter(stack.driver.profile)
+        s.request_mode("teleop")
+        stuck = press_into(s, world_name)
+        s.set_teleop(Twist2D(), "test")
+        s.request_mode("idle")
+        stack.localization.set_initial_pose(stack.driver.truth_pose)
+        stack.navigation.set_goals([NAV_OUT[world_name]])
+        t0, outcome = s.clock.now(), None
+        while s.clock.now() - t0 < 90.0 and outcome is None:
+            s.run_for(s.period)
+            if stack.navigation.last_outcome is not None and not stack.navigation.active:
+                outcome = stack.navigation.last_outcome
+        assert outcome is not None and outcome["kind"] == "reached", outcome
+        assert moved(stack.driver.truth_pose, stuck) > 0.5
+    finally:
+        s.close()
