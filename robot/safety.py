@@ -15,8 +15,8 @@ Three zones, as collision_monitor's polygons, all derived from the robot's footp
 - **slowdown** (footprint + ``slowdown_margin``): readings there that the motion approaches scale
   the whole twist by ``slowdown_ratio``.
 - **approach**: the footprint is moved along the commanded twist (exact SE(2) arcs) every
-  ``simulation_time_step`` (finer when a footprint point would move more than ``SWEEP_STEP``
-  between two poses: the swept footprint of a turn, not just its ends) up to
+  ``simulation_time_step`` (finer when turning would move a footprint point more than
+  ``SWEEP_STEP`` between two poses: the swept footprint of a turn, not just its ends) up to
   ``time_before_collision``; if readings would enter it at time
   t_c, the twist is scaled by t_c / time_before_collision so that the collision is never nearer
   than that horizon (collision_monitor's ``approach`` action).
@@ -44,7 +44,8 @@ from robot.kinematics import integrate_twist, se2_exp
 from robot.profiles import RobotProfile
 
 SWEEP_STEP = 0.02
-"""m; the approach check moves no footprint point farther than this between two simulated poses (a
+"""m; by turning, no footprint point moves farther than this between two simulated poses of the
+approach check (a
 0.51 x 0.43 m base turning at 1.8 rad/s moves a corner 6 cm per 0.1 s ``simulation_time_step``,
 enough to pass a post's few readings between two checked poses)."""
 
@@ -428,7 +429,8 @@ class SafetyFilter:
         if w[cand].sum() < o.min_points:
             return None, -1
         p, wc = pts[cand], w[cand]
-        sweep = speed + abs(twist.wz) * (0.0 if self._circle is not None else self._reach_fp)
+        # the turn moves the footprint's corners (a circle does not change by turning)
+        sweep = abs(twist.wz) * (0.0 if self._circle is not None else self._reach_fp)
         dt = o.simulation_time_step
         if sweep * dt > SWEEP_STEP:
             dt = SWEEP_STEP / sweep
