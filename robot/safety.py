@@ -49,6 +49,15 @@ approach check (a
 0.51 x 0.43 m base turning at 1.8 rad/s moves a corner 6 cm per 0.1 s ``simulation_time_step``,
 enough to pass a post's few readings between two checked poses)."""
 
+PERSON_MAX_SPEED = 1.5
+"""m/s; fastest walker the approach check predicts (faster apparent motion is a mismatch)."""
+PERSON_MIN_SPEED = 0.2
+"""m/s; slower apparent motion of a cluster is taken for noise (a static object)."""
+PERSON_MAX_EXTENT = 0.7
+"""m; a cluster of returns wider than this is a wall or furniture, not a person."""
+CLUSTER_GAP = 0.15
+"""m; consecutive returns farther apart than this belong to different objects."""
+
 COMMAND_GAP = 0.25
 """s; a longer pause between calls means the robot was stopped without the filter (see ``_ingest``)."""
 
@@ -187,6 +196,12 @@ class SafetyFilter:
         self._ir_range = np.array([s.range for s in ir], dtype=float)
         # state between frames
         self._scan_pts = np.zeros((0, 2))  # base_link at the scan's stamp
+        self._scan_vel = np.zeros((0, 2))  # predicted velocity of each reading, same frame
+        # person-sized clusters of the previous scan: centroids (base at its stamp) and the stamp
+        self._clusters = np.zeros((0, 2))
+        self._clusters_stamp = -math.inf
+        # walkers are followed this far: within the approach horizon they can reach the footprint
+        self._track_reach = self._reach + PERSON_MAX_SPEED * o.time_before_collision
         self._scan_stamp = -math.inf
         self._scan_shift = Pose2D()  # base at scan time -> base now
         self._garbage = 0.0  # fraction of garbage beams in the latest scan
@@ -221,10 +236,13 @@ class SafetyFilter:
                 garbage = np.isnan(r) | (finite & ((r < 0.0) | (r > 2.0 * scan.range_max)))
                 ok = finite & (r >= scan.range_min) & (r <= scan.range_max)
             self._garbage = float(garbage.mean()) if r.size else 0.0
-            ok &= r <= self._scan_reach
+            ok &= r <= max(self._scan_reach, self._track_reach)
             ang = scan.angles[ok]
             pts = np.column_stack((r[ok] * np.cos(ang), r[ok] * np.sin(ang)))
-            self._scan_pts = self._mount.transform_points(pts) if pts.size else np.zeros((0, 2))
+            pts = self._mount.transform_points(pts) if pts.size else np.zeros((0, 2))
+            vel = self._walker_velocities(pts, scan.stamp)
+            keep = (np.hypot(pts[:, 0], pts[:, 1]) <= self._scan_reach) | vel.any(axis=1)
+            self._scan_pts, self._scan_vel = pts[keep], vel[keep]
             self._scan_stamp = scan.stamp
             self._scan_shift = Pose2D()
             lag = now - scan.stamp
@@ -241,24 +259,62 @@ class SafetyFilter:
             self._ir_stamp = ir.stamp
             self._ir_shift = Pose2D()
 
-    def _readings(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def _walker_velocities(self, pts: np.ndarray, stamp: float) -> np.ndarray:
+        """Predicted velocity (N, 2) of each of a scan's readings (base at ``stamp``, beam order):
+        zero except for person-sized clusters (consecutive returns less than ``CLUSTER_GAP`` apart,
+        at most ``PERSON_MAX_EXTENT`` wide) whose centroid moved, against the nearest such cluster
+        of the previous scan (moved by the robot's own motion since), at a walking speed. Constant
+        velocity, as teb_local_planner's and collision_monitor's dynamic obstacles."""
+        vel = np.zeros_like(pts)
+        if pts.shape[0] == 0:
+            self._clusters, self._clusters_stamp = np.zeros((0, 2)), stamp
+            return vel
+        label = np.concatenate(([0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T) > CLUSTER_GAP)))
+        count = np.bincount(label)
+        centre = (
+            np.column_stack((np.bincount(label, pts[:, 0]), np.bincount(label, pts[:, 1]))) / count[:, None]
+        )
+        first = np.searchsorted(label, np.arange(len(count)))
+        last = np.searchsorted(label, np.arange(len(count)), side="right") - 1
+        extent = np.hypot(*(pts[last] - pts[first]).T)
+        person = (count >= 3) & (extent <= PERSON_MAX_EXTENT)
+        dt = stamp - self._clusters_stamp
+        prev = self._scan_shift.inverse().transform_points(self._clusters) if self._clusters.size else None
+        if prev is not None and 0.0 < dt <= 1.0 and person.any():
+            d = np.hypot(centre[:, None, 0] - prev[None, :, 0], centre[:, None, 1] - prev[None, :, 1])
+            j = d.argmin(axis=1)
+            v = (centre - prev[j]) / dt
+            speed = np.hypot(v[:, 0], v[:, 1])
+            walking = person & (speed >= PERSON_MIN_SPEED) & (speed <= PERSON_MAX_SPEED)
+            vel = np.where(walking[label][:, None], v[label], 0.0)
+        self._clusters, self._clusters_stamp = centre[person], stamp
+        return vel
+
+    def _readings(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Readings in the current base frame near the robot: points (N, 2), weights (N,), source
-        index (N,: -1 lidar, k >= 0 IR sensor k)."""
-        parts, weights, srcs = [], [], []
+        index (N,: -1 lidar, k >= 0 IR sensor k) and predicted velocities (N, 2), with each walker's
+        readings moved on to ``now``."""
+        parts, weights, srcs, vels = [], [], [], []
         if self._scan_pts.shape[0]:
-            pts = self._scan_shift.inverse().transform_points(self._scan_pts)
+            back = self._scan_shift.inverse()
+            c, s = math.cos(back.theta), math.sin(back.theta)
+            vel = self._scan_vel @ np.array([[c, s], [-s, c]])
+            pts = back.transform_points(self._scan_pts) + vel * max(now - self._scan_stamp, 0.0)
             parts.append(pts)
             weights.append(np.ones(pts.shape[0]))
             srcs.append(np.full(pts.shape[0], -1))
+            vels.append(vel)
         if self._ir_pts.shape[0] and now - self._ir_stamp <= self.options.ir_timeout:
             parts.append(self._ir_shift.inverse().transform_points(self._ir_pts))
             weights.append(np.full(self._ir_pts.shape[0], float(self.options.min_points)))
             srcs.append(self._ir_src)
+            vels.append(np.zeros((self._ir_pts.shape[0], 2)))
         if not parts:
-            return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.intp)
-        pts = np.concatenate(parts)
-        near = np.hypot(pts[:, 0], pts[:, 1]) <= self._reach
-        return pts[near], np.concatenate(weights)[near], np.concatenate(srcs)[near]
+            return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
+        pts, vel = np.concatenate(parts), np.concatenate(vels)
+        speed = np.hypot(vel[:, 0], vel[:, 1])
+        near = np.hypot(pts[:, 0], pts[:, 1]) <= self._reach + speed * self.options.time_before_collision
+        return pts[near], np.concatenate(weights)[near], np.concatenate(srcs)[near], vel[near]
 
     # ---------------------------------------------------------------------------------- filter
     def __call__(self, cmd: Twist2D, frame: SensorFrame) -> tuple[Twist2D, str | None]:
@@ -285,7 +341,7 @@ class SafetyFilter:
             what = f"lidar returns garbage ({self._garbage:.0%} of beams invalid)"
             self.status = SafetyStatus("stop", f"stop: {what}", math.inf, "lidar")
             return ZERO_TWIST, self.status.reason
-        pts, w, src = self._readings(now)
+        pts, w, src, vel = self._readings(now)
         if cmd.is_zero() or pts.shape[0] == 0:
             self.status = SafetyStatus(None, None, math.inf, None)
             return cmd, None
@@ -330,7 +386,7 @@ class SafetyFilter:
                 reason = f"slowdown: {self._name(int(src[j]))} obstacle {dist[j]:.2f} m from the footprint"
 
         if o.approach_enabled:
-            t_c, j = self._time_to_collision(twist, pts, w, inside)
+            t_c, j = self._time_to_collision(twist, pts, w, inside, vel)
             if t_c is not None and t_c < o.time_before_collision:
                 ratio = t_c / o.time_before_collision
                 twist = Twist2D(twist.vx * ratio, twist.vy * ratio, twist.wz * ratio)
@@ -353,7 +409,7 @@ class SafetyFilter:
     def nearest_reading(self, now: float) -> float:
         """Distance (m) from the footprint to the nearest of the latest readings (0 inside it, inf
         with none near), whatever the last command was."""
-        pts, _, _ = self._readings(now)
+        pts, _, _, _ = self._readings(now)
         if pts.shape[0] == 0:
             return math.inf
         if self._circle is not None:
@@ -366,7 +422,7 @@ class SafetyFilter:
         leave room for it: the moved footprint takes in no reading within ``distance`` metres of
         travel (a turn: the same arc length at the footprint's farthest point). What the dashboard
         tells an operator whose robot is in contact."""
-        pts, w, _ = self._readings(now)
+        pts, w, _, vel = self._readings(now)
         out = {}
         if pts.shape[0] == 0:
             return {name: True for name, _, _ in self.FREE_PROBES}
@@ -378,7 +434,7 @@ class SafetyFilter:
         for name, sv, sw in self.FREE_PROBES:
             v = distance / horizon
             twist = Twist2D(sv * v, 0.0, sw * v / max(self._reach_fp, 1e-3))
-            t_c, _ = self._time_to_collision(twist, pts, w, inside)
+            t_c, _ = self._time_to_collision(twist, pts, w, inside, vel)
             out[name] = t_c is None
         return out
 
@@ -416,19 +472,28 @@ class SafetyFilter:
         return np.zeros(2)
 
     def _time_to_collision(
-        self, twist: Twist2D, pts: np.ndarray, w: np.ndarray, inside_now: np.ndarray
+        self,
+        twist: Twist2D,
+        pts: np.ndarray,
+        w: np.ndarray,
+        inside_now: np.ndarray,
+        vel: np.ndarray | None = None,
     ) -> tuple[float | None, int]:
         """First simulated time at which >= min_points readings fall inside the moved footprint
-        (readings already inside are left to the stop zone), and the index of one of them."""
+        (readings already inside are left to the stop zone; walkers' readings move on at their
+        predicted velocity ``vel``), and the index of one of them."""
         o = self.options
         cand = ~inside_now
         speed = math.hypot(twist.vx, twist.vy)
         reach = self._reach_fp + speed * o.time_before_collision + 1e-6
         r = np.hypot(pts[:, 0], pts[:, 1])
+        if vel is not None:
+            r = r - np.hypot(vel[:, 0], vel[:, 1]) * o.time_before_collision
         cand &= r <= (reach if speed > 0 else self._turn_reach)
         if w[cand].sum() < o.min_points:
             return None, -1
         p, wc = pts[cand], w[cand]
+        pv = vel[cand] if vel is not None else np.zeros_like(p)
         # the turn moves the footprint's corners (a circle does not change by turning)
         sweep = abs(twist.wz) * (0.0 if self._circle is not None else self._reach_fp)
         dt = o.simulation_time_step
@@ -436,7 +501,9 @@ class SafetyFilter:
             dt = SWEEP_STEP / sweep
         t = np.arange(1, math.ceil(o.time_before_collision / dt - 1e-9) + 1) * dt
         ex, ey, th = se2_exp(twist.vx * t, twist.vy * t, twist.wz * t)  # future poses in base now
-        dx, dy = p[None, :, 0] - ex[:, None], p[None, :, 1] - ey[:, None]
+        px = p[None, :, 0] + pv[None, :, 0] * t[:, None]  # (K, N) readings at time t
+        py = p[None, :, 1] + pv[None, :, 1] * t[:, None]
+        dx, dy = px - ex[:, None], py - ey[:, None]
         if self._circle is not None:  # rotation does not move a circle
             hit = dx * dx + dy * dy <= self._circle**2  # (K, N)
         else:
