@@ -295,3 +295,37 @@ def test_safety_predicts_a_walker_coming_head_on() -> None:
     h = SafetyFilter(load_profile("skid4"))
     h(cmd, SensorFrame(stamp=0.0, scan=person_scan(0.0, 1.0, 0.5)))
     assert h(cmd, SensorFrame(stamp=0.1, scan=person_scan(0.1, 1.0, 0.6))) == (cmd, None)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_teb_meets_a_walker_in_a_greenhouse_aisle_without_contact(seed: int) -> None:
+    """TEB drives down a 1.2 m greenhouse aisle (safety layer on, as the server wires it) while a
+    walker comes the other way along it, off-centre by up to 0.3 m at 0.6-1.2 m/s: they meet
+    (closer than 0.6 m centre to centre), and the robot never touches the walker while moving
+    (it waits or backs off; a walker never steps into the robot in the simulator)."""
+    world = World.stock("greenhouse")
+    start = Pose2D(4.0, 6.2, 0.0)
+    stack = build_sim_stack(world.grid, world, start, localization="truth", controller="teb", seed=seed)
+    s = stack.session
+    try:
+        s.safety = SafetyFilter(stack.driver.profile)
+        rng = np.random.default_rng(seed)
+        y = 6.2 + rng.uniform(-0.3, 0.3)
+        stack.driver.people.add_loop([[10.0, y], [3.0, y]], speed=float(rng.uniform(0.6, 1.2)))
+        stack.localization.set_initial_pose(start)
+        stack.navigation.set_goals([Pose2D(11.0, 6.2, 0.0)])
+        closest, moving_contacts = math.inf, 0
+        t0 = s.clock.now()
+        while s.clock.now() - t0 < 30.0 and (
+            stack.navigation.active or stack.navigation.last_outcome is None
+        ):
+            before = s.collisions
+            s.run_for(s.period)
+            truth = stack.driver.truth_pose
+            closest = min(closest, float(np.hypot(*(stack.driver.people.xy[0] - [truth.x, truth.y]))))
+            if s.collisions > before and not s.last_command.is_zero():
+                moving_contacts += 1
+        assert closest < 0.6  # the walker did come past the robot
+        assert moving_contacts == 0
+    finally:
+        s.close()
