@@ -1,5 +1,7 @@
 """SLAM benchmarks: front-end time per 360-beam scan, 2000-pose graph optimization, and (slow group)
-the Freiburg benchmark logs scored with the Kümmerle et al. 2009 metric."""
+the Freiburg benchmark logs scored with the Kümmerle et al. 2009 metric, the simulated 1-hour
+drives through seeded large buildings (``slam.building``) scored the same way against the
+simulator's truth, and MIT Killian Court's map consistency (``slam.killian``)."""
 
 from __future__ import annotations
 
@@ -137,10 +139,118 @@ def _log(name: str) -> list[Figure]:
     ]
 
 
+BUILDING_SEEDS = (1, 2, 3)
+"""The simulated family: one seeded building and drive per seed."""
+
+
+def building_family(seeds: tuple[int, ...] = BUILDING_SEEDS, duration: float = 3600.0) -> list[Figure]:
+    """Per seed: a >= 100 x 60 m building (:func:`nav.slam.building.large_building`), a ``duration``
+    s drive at 2 Hz with a 181-beam 180 deg laser (30 m) and drifting odometry, SLAM over it as
+    ``navdeck slam`` runs it (:func:`nav.slam.offline.run_offline`, defaults), scored with the
+    relations metric on revisit relations (poses < 2 m apart, >= 300 s apart in time) and local
+    ones (5 s apart). Speed = drive duration / SLAM CPU time (process time, all threads)."""
+    from nav.slam.building import large_building, long_drive, truth_relations
+    from nav.slam.metric import relation_errors
+    from nav.slam.offline import run_offline
+    from nav.types import Pose2D
+
+    figs: list[Figure] = []
+    means, worst, rates = [], [], []
+    for seed in seeds:
+        building = large_building(seed)
+        drive = long_drive(building, seed, duration=duration)
+        far, local = truth_relations(drive.stamps, drive.truth, seed)
+        records = [
+            (s.stamp, s, Pose2D.from_array(o)) for s, o in zip(drive.scans, drive.odometry, strict=True)
+        ]
+        t0 = time.process_time()
+        slam = run_offline(records, Pose2D())
+        cpu = time.process_time() - t0
+        traj = slam.trajectory()
+        e_far, _, _ = relation_errors(traj, far)
+        e_all, r_all, _ = relation_errors(traj, np.vstack((far, local)))
+        e_odo, _, _ = relation_errors(np.column_stack((drive.stamps, drive.odometry)), far)
+        rate = float(drive.stamps[-1]) / cpu
+        w, h = building.size
+        tag = f"building {seed} ({w:.0f} x {h:.0f} m, {len(drive.scans)} scans)"
+        figs += [
+            Figure(
+                f"{tag}: error, all relations", float(e_all.mean()), "m", "<= 0.05 m", e_all.mean() <= 0.05
+            ),
+            Figure(f"{tag}: worst relation", float(e_all.max()), "m", "<= 1 m", e_all.max() <= 1.0),
+            Figure(
+                f"{tag}: revisit relations error (odometry alone)",
+                float(e_far.mean()),
+                "m",
+                f"odometry {e_odo.mean():.2f} m",
+            ),
+            Figure(f"{tag}: rotational error", float(np.degrees(r_all).mean()), "deg"),
+            Figure(
+                f"{tag}: loop closures (global)",
+                float(slam.num_loop_closures),
+                "",
+                f"global {slam.global_closures}, rejected {slam.rejected_global}",
+            ),
+            Figure(f"{tag}: speed vs the drive", rate, "x", ">= 20x", rate >= 20),
+        ]
+        means.append(float(e_all.mean()))
+        worst.append(float(e_all.max()))
+        rates.append(rate)
+    figs += [
+        Figure(
+            "building family: mean error", float(np.mean(means)), "m", "<= 0.05 m", np.mean(means) <= 0.05
+        ),
+        Figure("building family: worst relation", float(np.max(worst)), "m", "<= 1 m", np.max(worst) <= 1.0),
+        Figure("building family: slowest speed", float(np.min(rates)), "x", ">= 20x", np.min(rates) >= 20),
+    ]
+    return figs
+
+
+def killian() -> list[Figure]:
+    """MIT Killian Court (17480 scans, re-stamped so its relations cannot be scored): ``navdeck
+    slam``'s pipeline in process (:func:`nav.slam.offline.run_offline` with the log's odometry),
+    then the map's consistency: the fraction of returns (<= 20 m, every 5th scan) that see more
+    than 0.3 m through a wall of the final map (:func:`nav.slam.consistency.see_through_rate`),
+    beside the same figure for the run without the global loop search; speed = log duration /
+    CPU time."""
+    from nav.slam.consistency import see_through_rate
+    from nav.slam.offline import run_offline
+    from nav.slam.system import SlamOptions
+    from robot.logs.reader import load_raw_log
+
+    raw = load_raw_log(DATA / "bags" / "mit-killian.clf2bag.bag")
+    records = raw.records()
+    scans = [r[1] for r in records]
+    duration = float(records[-1][0]) - float(records[0][0])
+    figs: list[Figure] = []
+    for label, options in (
+        ("", SlamOptions()),
+        (" without global search", SlamOptions(global_search_drift=0.0)),
+    ):
+        t0 = time.process_time()
+        slam = run_offline(records, raw.laser, options, odometry=(raw.t_odom, raw.odom))
+        cpu = time.process_time() - t0
+        rate = duration / cpu
+        rate_see = see_through_rate(slam.map(), slam.trajectory(sensor=True)[:, 1:], scans)
+        figs += [
+            Figure(f"killian{label}: returns seeing through a mapped wall", 100 * rate_see, "%"),
+            Figure(
+                f"killian{label}: loop closures (global, rejected)",
+                float(slam.num_loop_closures),
+                "",
+                f"{slam.global_closures}, {slam.rejected_global}",
+            ),
+            Figure(f"killian{label}: speed vs recording", rate, "x", ">= 20x", rate >= 20),
+        ]
+    return figs
+
+
 BENCHMARKS = [
     Benchmark(name="slam.front_end", run=front_end),
     Benchmark(name="slam.optimize_2000", run=optimize_2000),
     Benchmark(name="slam.intel", run=lambda: _log("intel"), group="slow"),
     Benchmark(name="slam.aces", run=lambda: _log("aces"), group="slow"),
     Benchmark(name="slam.fr079", run=lambda: _log("fr079"), group="slow"),
+    Benchmark(name="slam.building", run=building_family, group="slow"),
+    Benchmark(name="slam.killian", run=killian, group="slow"),
 ]

@@ -66,6 +66,16 @@ def correlative_search(
 ) -> tuple[Pose2D, float]:
     """Best pose (on the search lattice) of points ``pts`` (N, 2, robot frame) in ``field``'s frame
     and its score (mean field value, 0..1)."""
+    pose, score, _ = correlative_search_runner_up(field, pts, prior, window, math.inf)
+    return pose, score
+
+
+def correlative_search_runner_up(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow, separation: float
+) -> tuple[Pose2D, float, float]:
+    """:func:`correlative_search`, plus the best score of the final candidates more than
+    ``separation`` (m) away from the best one (0 when there is none): a runner-up almost as good
+    as the best says the match is ambiguous (a corridor that looks the same a few metres along)."""
     if pts.shape[0] == 0:
         raise ScanMatchError("no points to match")
     if pts.shape[0] > window.max_points:
@@ -104,9 +114,10 @@ def correlative_search(
             dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
             best = np.lexsort((dist, -score))[0]
             a, dy, dx = cand[best]
-            return Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a]))), float(
-                score[best]
-            )
+            apart = np.hypot(cand[:, 1] - dy, cand[:, 2] - dx) * res > separation
+            runner_up = float(score[apart].max()) if apart.any() else 0.0
+            pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+            return pose, float(score[best]), runner_up
     raise AssertionError("unreachable")
 
 

@@ -37,7 +37,7 @@ def _nearest(t_sorted: np.ndarray, q: np.ndarray) -> np.ndarray:
     return np.where(np.abs(q - left) <= np.abs(right - q), k - 1, k)
 
 
-def _rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+def relative_poses(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise a^-1 b for (N, 3) poses."""
     c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
     dx, dy = b[:, 0] - a[:, 0], b[:, 1] - a[:, 1]
@@ -76,10 +76,10 @@ def relation_errors(
     ok = (np.abs(t[k1] - relations[:, 0]) <= tolerance) & (np.abs(t[k2] - relations[:, 1]) <= tolerance)
     if not ok.any():
         raise MetricError("no relation timestamps match the trajectory")
-    d = _rel(poses[k1[ok]], poses[k2[ok]])
+    d = relative_poses(poses[k1[ok]], poses[k2[ok]])
     z = relations[ok][:, 2:5]
     # e = z^-1 d
-    e = _rel(z, d)
+    e = relative_poses(z, d)
     return np.hypot(e[:, 0], e[:, 1]), np.abs(e[:, 2]), int((~ok).sum())
 
 

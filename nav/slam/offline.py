@@ -66,4 +66,6 @@ def run_offline(
                 slam.odometry_lag = est.lag
                 k = 0
     slam.run_backend()
+    while slam.unsearched_nodes:  # a confirmed global closure stops a round early
+        slam.run_backend()
     return slam

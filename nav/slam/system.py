@@ -19,9 +19,16 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from nav.grid import LogOddsOptions
-from nav.slam.loop_closure import LoopCandidate, find_loop_closure
+from nav.slam.loop_closure import (
+    GlobalProposal,
+    LoopCandidate,
+    find_loop_closure,
+    global_search_region,
+    observed_fraction,
+    proposals_agree,
+)
 from nav.slam.matcher import RefineOptions, ScanMatchError, SearchWindow, match_scan
-from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, optimize_pose_graph
+from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
 from nav.slam.render import render_submaps
 from nav.slam.submap import Submap
 from nav.types import LaserScan, OccupancyGrid, Pose2D
@@ -125,6 +132,46 @@ class SlamOptions:
     loop_field_cache_size: int = 12
     """Finished submaps whose likelihood field is kept for loop search (least recently searched
     ones release it; it is rebuilt on demand). Bounds memory on long logs."""
+    global_search_drift: float = 0.03
+    """Pose uncertainty (m) per metre driven since the last accepted loop closure. Once it exceeds
+    ``loop_search_space_dimension`` a node's closures are searched globally: in every older
+    finished submap whose centre is within ``loop_search_maximum_distance`` + the uncertainty (all
+    of them once that exceeds the map), over the part of the submap's trajectory within the
+    uncertainty of the guess (Cartographer's global constraint search, bounded by the drift)."""
+    global_search_angular_drift: float = math.radians(0.1)
+    """Heading uncertainty (rad) per metre driven since the last loop closure, added to
+    ``loop_search_angular_window`` (at most pi) in a global search."""
+    global_search_every_n_nodes: int = 10
+    """Only every n-th node is searched globally (Cartographer's global ``sampling_ratio`` is lower;
+    a revisit lasts many nodes, so a few searches along it suffice)."""
+    global_search_max_candidates: int = 3
+    """Submaps searched globally per node: the nearest (by the drifted estimate) but one, and one
+    more taken in turn from all the other candidates, so every older submap is searched."""
+    global_search_levels: int = 6
+    """Coarse-to-fine levels of the global search (max-pooled blocks of 2^6 cells = 3.2 m)."""
+    global_search_beam: int = 256
+    """Candidates kept per level of the global search."""
+    global_match_minimum_score: float = 0.65
+    """Minimum mean likelihood of *all* the node's points (none left out) for a global match."""
+    global_match_minimum_observed: float = 0.8
+    """A global match must put at least this fraction of the points on cells the submap observed."""
+    global_ambiguity_separation: float = 1.0
+    """A global match is rejected when a candidate more than this far (m) from it ...
+    """
+    global_ambiguity_margin: float = 0.05
+    """... scores within this much (mean likelihood) of it: the scan fits two places equally (a
+    corridor seen along its length looks the same a few metres further)."""
+    global_agreement_nodes: int = 150
+    """A global match is accepted only with a second one, from another node at most this many nodes
+    away, that implies the same correction (:func:`nav.slam.loop_closure.proposals_agree`)."""
+    global_agreement_translation: float = 0.3
+    """Translation tolerance (m) of that agreement."""
+    global_agreement_rotation: float = math.radians(2.0)
+    """Rotation tolerance (rad) of that agreement."""
+    global_max_residual: float = 10.0
+    """After optimization an accepted global closure whose Mahalanobis error sqrt(e^T Omega e) is
+    still above this (0.2 m at the 0.02 m constraint sigma) fights the rest of the graph: the
+    batch's global closures are dropped and the graph optimized without them (chi2 check)."""
     optimize_every_n_nodes: int = 100
     """Back end optimizes after this many new nodes even without a new loop (Cartographer 90)."""
     constraint_translation_sigma: float = 0.02
@@ -227,6 +274,13 @@ class GraphSlam:
         self._correction = Pose2D()  # map <- local
         self._optimized_upto = 0  # nodes [0, n) have optimized map poses
         self._searched_upto = 0
+        self._seen_at: dict[int, int] = {}  # submap -> newest node loop-closed with it (back end)
+        self._pending: list[GlobalProposal] = []  # global matches awaiting agreement (back end)
+        self._global_turn = 0  # rotates the global search through all candidate submaps
+        self.global_closures = 0
+        """Global loop closures accepted (confirmed and consistent after optimization)."""
+        self.rejected_global = 0
+        """Confirmed global closures dropped because the optimized graph did not agree with them."""
         self._map: OccupancyGrid | None = None
         self._map_nodes = -1
         self.last_score = float("nan")
@@ -391,8 +445,10 @@ class GraphSlam:
                 start = self._searched_upto
             if n < 2:
                 return False
-            new_loops = self._search_loops(nodes, glob, submaps, finished, sm_nodes, sm_glob, start, n)
-            if not new_loops and start > 0:
+            new_loops, new_global, searched = self._search_loops(
+                nodes, glob, submaps, finished, sm_nodes, sm_glob, start, n
+            )
+            if not new_loops and not new_global and start > 0:
                 # No new constraint: the new nodes already satisfy their front-end edges at the
                 # current correction, so re-optimizing would barely move anything. Skip it.
                 with self._lock:
@@ -400,14 +456,23 @@ class GraphSlam:
                     self._global[start:n] = list(glob[start:n])
                     self._optimized_upto = max(self._optimized_upto, n)
                 return False
-            edges = self._edges(nodes, submaps, sm_nodes, n, m, self._loops + new_loops)
             x0 = np.vstack((glob, sm_glob))
-            x, _w = optimize_pose_graph(
-                x0, edges, 0, PoseGraphOptions(max_iterations=o.max_iterations, huber_delta=o.huber_delta)
-            )
+            graph_options = PoseGraphOptions(max_iterations=o.max_iterations, huber_delta=o.huber_delta)
+            edges = self._edges(nodes, submaps, sm_nodes, n, m, self._loops + new_loops + new_global)
+            x, _w = optimize_pose_graph(x0, edges, 0, graph_options)
+            if new_global and self._global_misfit(x, edges, len(new_global)):
+                # the confirmed global closures still fight the rest of the graph: a wrong pair
+                # (aliasing) would fold the map, so the batch's global closures are dropped
+                self.rejected_global += len(new_global)
+                new_global = []
+                edges = self._edges(nodes, submaps, sm_nodes, n, m, self._loops + new_loops)
+                x, _w = optimize_pose_graph(x0, edges, 0, graph_options)
             with self._lock:  # publish (brief)
-                self._loops.extend(new_loops)
-                self._searched_upto = n
+                self._loops.extend(new_loops + new_global)
+                self.global_closures += len(new_global)
+                for lc in new_global:
+                    self._seen_at[lc.submap] = max(self._seen_at.get(lc.submap, 0), lc.node)
+                self._searched_upto = searched
                 self._global[:n] = list(x[:n])
                 self._submap_global[:m] = list(x[n:])
                 last = nodes[n - 1]
@@ -429,16 +494,23 @@ class GraphSlam:
         sm_glob: np.ndarray,
         start: int,
         n: int,
-    ) -> list[LoopCandidate]:
-        """Loop closures for nodes ``[start, n)`` against nearby finished submaps (snapshot data)."""
+    ) -> tuple[list[LoopCandidate], list[LoopCandidate], int]:
+        """Loop closures for nodes ``[start, n)`` against finished submaps (snapshot data): the ones
+        found by the local search of nearby submaps, the global ones that were confirmed, and the
+        node the search stopped before (``n``, or just after the first confirmed global ones)."""
         o = self.options
         if not finished:
-            return []
+            return [], [], n
         fin = np.array(finished)
         centres = np.array([glob[sm_nodes[j]][:, :2].mean(axis=0) for j in finished])
+        local_xy = np.array([nd.local.as_array()[:2] for nd in nodes])
+        path = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(local_xy, axis=0).T))))
         found: list[LoopCandidate] = []
+        agreed: list[LoopCandidate] = []
         for i in range(start, n):
-            if i % o.loop_search_every_n_nodes:
+            local_due = i % o.loop_search_every_n_nodes == 0
+            global_due = i % o.global_search_every_n_nodes == 0
+            if not (local_due or global_due):
                 continue
             d = np.hypot(*(centres - glob[i, :2]).T)
             # not its own submaps nor the one just before them (as documented; it shares the
@@ -448,28 +520,139 @@ class GraphSlam:
             mine = set(nodes[i].submaps)
             if mine:
                 mine.add(min(mine) - 1)
-            order = [
-                k
-                for k in np.argsort(d, kind="stable")
-                if d[k] <= o.loop_search_maximum_distance and fin[k] not in mine
-            ]
-            for k in order[: o.loop_max_candidates]:
-                j = int(fin[k])
-                guess = Pose2D.from_array(glob[i]).relative_to(Pose2D.from_array(sm_glob[j]))
-                cand = find_loop_closure(
-                    submaps[j],
-                    i,
-                    nodes[i].points,
-                    guess,
-                    self._loop_window,
-                    o.loop_match_minimum_response_fine,
-                    self._refine,
-                    o.match_unobserved_points,
+            eligible = ~np.isin(fin, list(mine))
+            uncertainty = o.global_search_drift * self._path_since_seen(path, i, fin, sm_nodes)
+            if local_due:
+                # the local window only covers a small drift: where it may be larger, a match in
+                # it is as likely the corridor's next door as the right one (only the global
+                # search, with its agreement check, looks there)
+                near = eligible & (d <= o.loop_search_maximum_distance)
+                if o.global_search_drift > 0:
+                    near &= uncertainty <= o.loop_search_space_dimension
+                order = [k for k in np.argsort(d, kind="stable") if near[k]]
+                for k in order[: o.loop_max_candidates]:
+                    j = int(fin[k])
+                    guess = Pose2D.from_array(glob[i]).relative_to(Pose2D.from_array(sm_glob[j]))
+                    cand = find_loop_closure(
+                        submaps[j],
+                        i,
+                        nodes[i].points,
+                        guess,
+                        self._loop_window,
+                        o.loop_match_minimum_response_fine,
+                        self._refine,
+                        o.match_unobserved_points,
+                    )
+                    if cand is not None:
+                        found.append(cand)
+                        self._seen_at[j] = i
+                    self._keep_field(submaps, j)
+            if global_due and o.global_search_drift > 0:
+                agreed.extend(
+                    self._search_global(
+                        i, nodes, glob, submaps, fin, sm_nodes, sm_glob, d, eligible, uncertainty
+                    )
                 )
-                if cand is not None:
-                    found.append(cand)
-                self._keep_field(submaps, j)
-        return found
+                if agreed:
+                    # the later nodes' estimates are metres off until the graph is optimized with
+                    # these closures: they are searched in the next round, from corrected poses
+                    return found, agreed, i + 1
+        return found, agreed, n
+
+    def _path_since_seen(
+        self, path: np.ndarray, i: int, fin: np.ndarray, sm_nodes: list[list[int]]
+    ) -> np.ndarray:
+        """Per finished submap ``j``: the path length (m) whose drift separates node ``i`` from it,
+        ``min_k (path since k was last seen) + (path between k's and j's centres)`` over every
+        finished submap ``k`` (k = j: straight back along the trajectory; else through the last
+        loop closure with k, one shortcut)."""
+        centre = np.array([path[sm_nodes[j]].mean() for j in fin])
+        seen = np.array([path[max(self._seen_at.get(int(j), sm_nodes[j][-1]), sm_nodes[j][-1])] for j in fin])
+        since = np.maximum(path[i] - seen, 0.0)
+        return np.min(since[:, None] + np.abs(centre[:, None] - centre[None, :]), axis=0)
+
+    def _search_global(
+        self,
+        i: int,
+        nodes: list[_Node],
+        glob: np.ndarray,
+        submaps: list[Submap],
+        fin: np.ndarray,
+        sm_nodes: list[list[int]],
+        sm_glob: np.ndarray,
+        d: np.ndarray,
+        eligible: np.ndarray,
+        uncertainty: np.ndarray,
+    ) -> list[LoopCandidate]:
+        """Global search of node ``i`` in the submaps it may be in given ``uncertainty`` (m, per
+        finished submap) beyond what the local search covers; returns closures confirmed by a
+        second, agreeing one (both)."""
+        o = self.options
+        wide = eligible & (uncertainty > o.loop_search_space_dimension)
+        wide &= d <= o.loop_search_maximum_distance + uncertainty
+        order = np.flatnonzero(wide)[np.argsort(d[wide], kind="stable")]
+        near = o.global_search_max_candidates - 1
+        picked = list(order[:near])
+        if len(order) > near:
+            picked.append(order[near + self._global_turn % (len(order) - near)])
+            self._global_turn += 1
+        self._pending = [p for p in self._pending if i - p.candidate.node <= o.global_agreement_nodes]
+        confirmed: list[LoopCandidate] = []
+        pts = nodes[i].points
+        for k in picked:
+            j = int(fin[k])
+            sm = submaps[j]
+            guess = Pose2D.from_array(glob[i]).relative_to(Pose2D.from_array(sm_glob[j]))
+            node_xy = np.array(
+                [nodes[q].local.relative_to(sm.local_pose).as_array()[:2] for q in sm_nodes[j]]
+            )
+            region = global_search_region(node_xy, guess, float(uncertainty[k]))
+            if region is None:
+                continue
+            prior, half = region
+            turn = o.global_search_angular_drift * float(uncertainty[k]) / o.global_search_drift
+            window = SearchWindow(
+                half,
+                min(math.pi, o.loop_search_angular_window + turn),
+                o.loop_search_angular_step,
+                o.global_search_levels,
+                o.global_search_beam,
+            )
+            cand = find_loop_closure(
+                sm,
+                i,
+                pts,
+                prior,
+                window,
+                o.global_match_minimum_score,
+                self._refine,
+                ambiguity=(o.global_ambiguity_separation, o.global_ambiguity_margin),
+            )
+            self._keep_field(submaps, j)
+            if cand is None or observed_fraction(sm, pts, cand.relative) < o.global_match_minimum_observed:
+                continue
+            implied = Pose2D.from_array(sm_glob[j]).compose(cand.relative).as_array()
+            proposal = GlobalProposal(cand, implied, glob[i])
+            partners = [
+                p
+                for p in self._pending
+                if p.candidate.node != i
+                and proposals_agree(p, proposal, o.global_agreement_translation, o.global_agreement_rotation)
+            ]
+            if not partners:
+                self._pending.append(proposal)
+                continue
+
+            confirmed.extend(p.candidate for p in [*partners, proposal])
+            self._pending = [p for p in self._pending if p not in partners]
+        return confirmed
+
+    def _global_misfit(self, x: np.ndarray, edges: EdgeSet, count: int) -> bool:
+        """Whether any of the last ``count`` edges (the new global closures) has a Mahalanobis
+        error above ``global_max_residual`` at the optimized poses ``x``."""
+        tail = EdgeSet(*(a[-count:] for a in (edges.i, edges.j, edges.z, edges.sqrt_info, edges.robust)))
+        m = np.sqrt(np.sum((edge_errors(x, tail) * tail.sqrt_info) ** 2, axis=1))
+        return bool(np.any(m > self.options.global_max_residual))
 
     def _keep_field(self, submaps: list[Submap], j: int) -> None:
         """Finished submaps keep their (pooled) likelihood field for the next loop searches, which
@@ -590,6 +773,12 @@ class GraphSlam:
     @property
     def num_nodes(self) -> int:
         return len(self._nodes)
+
+    @property
+    def unsearched_nodes(self) -> int:
+        """Nodes not yet searched for loop closures by the back end."""
+        with self._lock:
+            return len(self._nodes) - self._searched_upto
 
     @property
     def num_loop_closures(self) -> int:

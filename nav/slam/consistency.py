@@ -1,0 +1,53 @@
+"""Map consistency without ground truth: how often a scan sees through a wall of the map it built.
+
+A log whose relations cannot be scored (MIT Killian Court, re-stamped) still tells whether its map
+is consistent: every beam says "free up to here, then a surface". Cast at the scan's estimated
+pose into the final map, a beam whose measured return lies well beyond the first occupied cell of
+the map crossed a wall that another pass put there. A loop that fails to close leaves two copies of
+a corridor offset from each other, and the scans of each pass cross the other copy's walls; a
+consistent map contradicts only a few beams (range noise at grazing angles, people, glass). This is
+the ray-contradiction test of map-consistency checks (e.g. Mazuran et al. 2014, "Map consistency
+checking"), reduced to one number: the fraction of beams contradicted.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from nav.raycast import RayCaster
+from nav.types import LaserScan, OccupancyGrid
+
+
+def see_through_rate(
+    grid: OccupancyGrid,
+    poses: np.ndarray,
+    scans: list[LaserScan],
+    max_range: float = 20.0,
+    margin: float = 0.3,
+    every: int = 5,
+) -> float:
+    """Fraction (0..1) of the returns (within ``max_range``) of every ``every``-th scan that lie
+    more than ``margin`` m beyond the first occupied map cell along their beam, with the scans cast
+    from their laser poses ``poses`` ((N, 3) map frame, one per scan)."""
+    if len(scans) != len(poses):
+        raise ValueError(f"{len(scans)} scans but {len(poses)} poses")
+    caster = RayCaster(grid.occupied_mask(), grid.geometry)
+    picked = range(0, len(scans), max(every, 1))
+    contradicted = total = 0
+    # cast in chunks of scans of the same beam count (one compiled walk per chunk)
+    chunk: list[int] = []
+    for k in [*picked, -1]:
+        if k >= 0 and (not chunk or len(scans[k].ranges) == len(scans[chunk[0]].ranges)) and len(chunk) < 500:
+            chunk.append(k)
+            continue
+        if chunk:
+            ranges = np.array([scans[q].ranges for q in chunk])
+            angles = np.array([scans[q].angles for q in chunk]) + poses[chunk, 2:3]
+            valid = np.isfinite(ranges) & (ranges > 0.1) & (ranges <= max_range)
+            expected = caster.cast(poses[chunk, :2], angles, max_range + margin)
+            contradicted += int(np.count_nonzero(valid & (ranges > expected + margin)))
+            total += int(np.count_nonzero(valid))
+        chunk = [k] if k >= 0 else []
+    return contradicted / total if total else math.nan
