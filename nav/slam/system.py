@@ -132,8 +132,9 @@ class SlamOptions:
     loop_field_cache_size: int = 12
     """Finished submaps whose likelihood field is kept for loop search (least recently searched
     ones release it; it is rebuilt on demand). Bounds memory on long logs."""
-    global_search_drift: float = 0.03
-    """Pose uncertainty (m) per metre driven since the last accepted loop closure. Once it exceeds
+    global_search_drift: float = 0.0
+    """Pose uncertainty (m) per metre driven since the last accepted loop closure (0 = off, the
+    default: see docs/slam.md, "Global loop search", for why it is not on yet). Once it exceeds
     ``loop_search_space_dimension`` a node's closures are searched globally: in every older
     finished submap whose centre is within ``loop_search_maximum_distance`` + the uncertainty (all
     of them once that exceeds the map), over the part of the submap's trajectory within the
@@ -521,7 +522,11 @@ class GraphSlam:
             if mine:
                 mine.add(min(mine) - 1)
             eligible = ~np.isin(fin, list(mine))
-            uncertainty = o.global_search_drift * self._path_since_seen(path, i, fin, sm_nodes)
+            uncertainty = (
+                o.global_search_drift * self._path_since_seen(path, i, fin, sm_nodes)
+                if o.global_search_drift > 0
+                else np.zeros(len(fin))
+            )
             if local_due:
                 # the local window only covers a small drift: where it may be larger, a match in
                 # it is as likely the corridor's next door as the right one (only the global
