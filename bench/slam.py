@@ -170,9 +170,11 @@ def building_family(
         slam = run_offline(records, Pose2D(), SlamOptions(global_search_drift=global_search_drift))
         cpu = time.process_time() - t0
         traj = slam.trajectory()
-        e_far, _, _ = relation_errors(traj, far)
+        odo = np.column_stack((drive.stamps, drive.odometry))
+        # a drive too short to revisit anything has no revisit relations
+        e_far = relation_errors(traj, far)[0] if len(far) else np.full(1, np.nan)
+        e_odo = relation_errors(odo, far)[0] if len(far) else np.full(1, np.nan)
         e_all, r_all, _ = relation_errors(traj, np.vstack((far, local)))
-        e_odo, _, _ = relation_errors(np.column_stack((drive.stamps, drive.odometry)), far)
         rate = float(drive.stamps[-1]) / cpu
         w, h = building.size
         tag = f"building {seed} ({w:.0f} x {h:.0f} m, {len(drive.scans)} scans)"
