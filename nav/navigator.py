@@ -89,9 +89,13 @@ class NavigatorOptions:
     stuck_timeout: float = 10.0
     """Seconds in STUCK without ``resume()`` or a fresh path before the goal fails; inf: never."""
     nominal_speed: float = 0.26
-    """Speed used for the ETA before the robot has moved, m/s."""
-    speed_time_constant: float = 2.0
-    """Time constant (s) of the moving average of speed behind the ETA."""
+    """Expected average speed (m/s): the ETA's speed until the robot has driven a while, and the
+    weight of the prior below."""
+    speed_prior_time: float = 10.0
+    """The ETA's speed is the average speed while following a path in this request, with
+    ``nominal_speed`` counted as if driven for this many seconds (s): a turn on the spot at the
+    start or a short stop moves the ETA a little, not by minutes. Time spent waiting for a path,
+    stuck or recovering is not driving and does not count."""
 
 
 @dataclass(frozen=True)
@@ -187,7 +191,8 @@ class Navigator:
         self._stuck_since = 0.0
         self._cancel_requested = False
         self._force_plan = ""
-        self._speed = self.options.nominal_speed
+        self._driven = 0.0  # m travelled while following a path in this request (for the ETA)
+        self._driving_time = 0.0  # s spent following a path in this request
         self._last_now: float | None = None
         self._debug: Any = None
         self._activity = "idle"
@@ -263,6 +268,7 @@ class Navigator:
             raise ValueError("goals must be finite poses")
         self._q = _Goal(list(goals), 0)
         self.outcome = None
+        self._driven = self._driving_time = 0.0
         self._cancel_requested = False
         self._start_goal()
 
@@ -327,6 +333,7 @@ class Navigator:
         if self._last_now is not None and now > self._last_now:
             self._tick_dt = now - self._last_now
         self._update_speed(now, velocity)
+        self._last_now = now
         self._debug = None
         if self._cancel_requested:
             self._cancel_requested = False
@@ -548,10 +555,22 @@ class Navigator:
         return self._tick(ZERO_TWIST, outcome)
 
     def _update_speed(self, now: float, velocity: Twist2D) -> None:
-        if self._last_now is not None and now > self._last_now:
-            a = min(1.0, (now - self._last_now) / self.options.speed_time_constant)
-            self._speed += a * (math.hypot(velocity.vx, velocity.vy) - self._speed)
-        self._last_now = now
+        """Count the last interval as driving when the previous tick was following a path (the
+        velocity measured now is what that tick's command produced)."""
+        if self.state == NavState.FOLLOWING and self._last_now is not None and now > self._last_now:
+            dt = now - self._last_now
+            self._driven += math.hypot(velocity.vx, velocity.vy) * dt
+            self._driving_time += dt
+
+    @property
+    def expected_speed(self) -> float:
+        """The ETA's speed (m/s): the average while following in this request, ``nominal_speed``
+        weighted as ``speed_prior_time`` s of driving (so it starts at ``nominal_speed``)."""
+        o = self.options
+        prior = max(o.speed_prior_time, 0.0)
+        if self._driving_time + prior <= 0.0:
+            return o.nominal_speed
+        return (self._driven + o.nominal_speed * prior) / (self._driving_time + prior)
 
     def _remaining(self) -> float:
         q = self._q
@@ -570,7 +589,7 @@ class Navigator:
 
     def _tick(self, cmd: Twist2D, outcome: NavOutcome | None = None) -> NavTick:
         remaining = self._remaining()
-        speed = self._speed if self._speed > 1e-3 else self.options.nominal_speed
+        speed = self.expected_speed
         q = self._q
         goal = q.goals[q.index] if q.goals and q.index < len(q.goals) else None
         dbg = self._debug
@@ -580,7 +599,7 @@ class Navigator:
             goal_count=len(q.goals),
             goal=goal,
             distance_remaining=remaining,
-            eta=remaining / max(speed, 0.05 * self.options.nominal_speed),
+            eta=remaining / speed if speed > 0.0 else math.inf,
             path=self._path,
             trajectories=getattr(dbg, "trajectories", None),
             chosen=int(getattr(dbg, "chosen", -1)),

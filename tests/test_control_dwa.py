@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -574,3 +575,86 @@ def test_footprint_already_touching_a_chair_leg_may_back_or_turn_out_but_not_dee
     ahead = np.flatnonzero((dbg.twists[:, 0] > 0.1) & (np.abs(dbg.twists[:, 2]) < 1e-9))
     assert ahead.size and not dbg.legal[ahead].any()  # straight on into the leg is not allowed
     assert cmd.vx <= 0.0 or abs(cmd.wz) > 0.0
+
+
+# --- PreferForward (DWB PreferForwardCritic) ---------------------------------------------------
+
+
+def test_prefer_forward_scores_like_dwb() -> None:
+    from nav.control.critics import PreferForward
+
+    opts = replace(SKID, critics=(*SKID.critics, "PreferForward"), prefer_forward_penalty=7.0)
+    ctl = DwaController(opts)
+    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
+    cm = inflate(room(), inscribed=0.1)
+    _, dbg = ctl.compute(Pose2D(1.0, 3.0, 0.0), Twist2D(0.05, 0.0, 0.1), cm)
+    cost = dbg.critic_costs["PreferForward"]
+    vx, wz = dbg.twists[:, 0], np.abs(dbg.twists[:, 2])
+    w = dbg.twists[:, 2]
+    fastest_each_way = (w == w.max()) | (w == w.min())  # turning as fast as the window allows
+    back = vx < 0
+    slow_straight = (vx >= 0) & (vx < 0.1) & (wz < 0.2) & ~fastest_each_way
+    other = ~back & ~slow_straight
+    assert back.any() and slow_straight.any() and other.any()
+    assert np.all(cost[back] == 7.0) and np.all(cost[slow_straight] == 7.0)
+    assert np.allclose(cost[other], 10.0 * wz[other])  # theta_scale x |w|
+    # from a standstill the window's fastest turn (0.16 rad/s < strafe_theta) counts as turning:
+    # otherwise standing still would cost as much as starting to turn
+    ctl.reset()
+    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
+    _, dbg = ctl.compute(Pose2D(1.0, 3.0, 0.0), Twist2D(), cm)
+    cost, tw = dbg.critic_costs["PreferForward"], dbg.twists
+    fastest = (tw[:, 0] == 0.0) & (np.abs(tw[:, 2]) == np.abs(tw[:, 2]).max())
+    still = (tw[:, 0] == 0.0) & (tw[:, 2] == 0.0)
+    assert fastest.any() and np.all(cost[fastest] < 7.0) and np.all(cost[still] == 7.0)
+    # a robot already turning may brake its turn through the band without the penalty
+    _, dbg = ctl.compute(Pose2D(1.0, 3.0, 0.0), Twist2D(0.0, 0.0, 0.3), cm)
+    cost, tw = dbg.critic_costs["PreferForward"], dbg.twists
+    braking = (tw[:, 0] >= 0.0) & (np.abs(tw[:, 2]) < 0.2)
+    assert braking.any() and np.all(cost[braking] < 7.0)
+    # the automatic penalty: what reversing can gain on the path and goal critics over one horizon
+    auto = PreferForward(replace(opts, prefer_forward_penalty=-1.0))
+    assert auto.penalty(RES) == pytest.approx((24.0 + 24.0 + 32.0 + 32.0) * 0.15 * 1.7 / RES)
+
+
+def test_prefer_forward_is_on_for_reversing_skid_bases_only() -> None:
+    from robot.profiles import load_profile
+
+    skid, omni = load_profile("skid4"), load_profile("omni4")
+    assert skid.limits.min_vel_x < 0  # the stock skid base can reverse
+    assert "PreferForward" in DwaOptions.for_robot(skid).critics
+    assert "PreferForward" not in DwaOptions.for_robot(omni).critics  # strafing is its point
+    assert "PreferForward" not in DwaOptions.for_robot(skid, critics=DwaOptions().critics).critics
+
+
+def _reversing_time(opts: DwaOptions, occ: np.ndarray, start: Pose2D, path: Path, seconds: float):
+    ctl = DwaController(opts)
+    ctl.set_path(path)
+    goal = Pose2D.from_array(path.poses[-1])
+    _, cmds, reached = drive(ctl, start, inflate(occ, inscribed=0.1), goal, seconds)
+    return sum(0.05 for c in cmds if c.vx < -0.01), reached
+
+
+def test_skid_base_turns_round_for_a_goal_behind_instead_of_reversing() -> None:
+    from robot.profiles import load_profile
+
+    opts = DwaOptions.for_robot(load_profile("skid4"))
+    path = straight(4.5, 3.0, 1.0, 3.0)  # 3.5 m behind the robot, which faces +x
+    back_s, reached = _reversing_time(opts, room(), Pose2D(4.5, 3.0, 0.0), path, 40.0)
+    assert reached and back_s <= 0.25, back_s
+    # Nav2's critic list alone reverses most of the way (what the dashboard showed)
+    plain = replace(opts, critics=DwaOptions().critics)
+    back_s, reached = _reversing_time(plain, room(), Pose2D(4.5, 3.0, 0.0), path, 40.0)
+    assert back_s > 5.0
+
+
+def test_skid_base_still_backs_out_of_a_dead_end() -> None:
+    from robot.profiles import load_profile
+
+    opts = DwaOptions.for_robot(load_profile("skid4"))
+    # a 0.30 m wide dead end (the 0.20 x 0.24 m robot needs 0.31 m to turn round), its nose 8 cm
+    # from the end: backing out is the only way
+    occ = box(box(box(room(), 3.0, 2.75, 4.6, 2.85), 3.0, 3.15, 4.6, 3.25), 4.5, 2.75, 4.6, 3.25)
+    path = straight(4.3, 3.0, 1.5, 3.0)
+    back_s, _ = _reversing_time(opts, occ, Pose2D(4.3, 3.0, 0.0), path, 30.0)
+    assert back_s > 1.0

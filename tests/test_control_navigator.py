@@ -448,3 +448,27 @@ def test_halt_stops_with_the_given_reason_until_resumed() -> None:
     assert out is not None and out.kind == "failed" and out.reason == "SafetyStop"
     nav.halt("SafetyStop", "after the end")  # no effect once finished
     assert nav.state == NavState.FAILED
+
+
+def test_eta_is_sane_while_waiting_for_a_slow_first_plan_and_while_driving() -> None:
+    """The dashboard showed a 12-minute ETA for a 5 m route after 5.8 s of "waiting for a path":
+    the speed average decayed towards zero while the robot stood waiting. Until a path exists the
+    ETA is the straight-line distance at the nominal speed; then it tracks the drive."""
+    cm = inflate(room(), inscribed=0.1)
+    requests: list[PlanRequest] = []
+    nav = make_nav(options=NavigatorOptions(nominal_speed=0.26), request_plan=requests.append)
+    start, goal = Pose2D(1.0, 3.0, math.pi / 2), Pose2D(5.0, 3.0, 0.0)  # facing sideways: turns first
+    nav.set_goals([goal])
+    now = 0.0
+    while now < 6.0:  # the first plan takes 6 s
+        tick = nav.tick(now, start, Twist2D(), cm)
+        assert tick.state == NavState.PLANNING and tick.feedback.activity == "waiting for a path"
+        assert tick.feedback.eta == pytest.approx(start.distance_to(goal) / 0.26)
+        now += DT
+    nav.deliver_plan(requests[0].id, GridPlanner().plan(requests[0].costmap, requests[0].start, goal))
+    etas: list[tuple[float, float]] = []
+    ticks, _ = run(nav, start, cm, 60.0, on_tick=lambda t, k: etas.append((t, k.feedback.eta)), start=now)
+    assert ticks[-1].outcome is not None and ticks[-1].outcome.kind == "reached"
+    end = etas[-1][0]
+    for t, eta in etas:  # within a factor of two of the time it really took, give or take 2 s
+        assert 0.5 * (end - t) - 2.0 <= eta <= 2.0 * (end - t) + 2.0, (t, eta, end)

@@ -364,6 +364,74 @@ class RotateToGoal(_Stateless):
         return self._yaw_error(ctx), illegal
 
 
+class PreferForward(_Stateless):
+    """Backing up costs ``penalty``, and so does a forward sample slower than ``strafe_x`` that
+    turns slower than ``strafe_theta`` (a base whose sensors look forwards); every other sample
+    costs ``theta_scale * |w|`` (turning is not progress). DWB ``PreferForwardCritic``.
+
+    navdeck's default penalty is automatic (``prefer_forward_penalty`` < 0): the most a reversing
+    sample can gain over one horizon on GoalDist + GoalAlign, so a goal behind the robot makes it
+    turn round rather than reverse the whole way, while a robot whose forward and turning samples
+    are all illegal (nose in a dead end) still backs out. Off inside the goal window, where
+    RotateToGoal alone decides."""
+
+    name = "PreferForward"
+
+    def __init__(self, options: DwaOptions) -> None:
+        super().__init__(options)
+        self.scale = options.prefer_forward_scale
+
+    def weight(self, ctx: CriticContext) -> float:
+        return 0.0 if ctx.in_goal_window else self.scale
+
+    def penalty(self, resolution: float) -> float:
+        o = self.options
+        if o.prefer_forward_penalty >= 0.0:
+            return o.prefer_forward_penalty
+        reach_cells = abs(min(o.min_vel_x, 0.0)) * o.sim_time / resolution
+        progress = o.goal_dist_scale + o.goal_align_scale + o.path_dist_scale + o.path_align_scale
+        return progress * reach_cells / max(self.scale, 1e-9)
+
+    def score(self, ctx: CriticContext) -> tuple[np.ndarray, np.ndarray]:
+        o = self.options
+        tw = ctx.trajectories.twists
+        vx, w = tw[:, 0], tw[:, 2]
+        penalised = vx < 0.0
+        v0 = ctx.velocity
+        if v0.vx < o.prefer_forward_strafe_x and abs(v0.wz) < o.prefer_forward_strafe_theta:
+            # DWB's strafe rule, only while the robot itself crawls or stands (a robot turning or
+            # driving may slow through the band, or it could never brake a turn it no longer
+            # wants); the fastest turn reachable each way this cycle counts as turning, since from
+            # rest the window does not reach strafe_theta yet
+            slow = (vx < o.prefer_forward_strafe_x) & (np.abs(w) < o.prefer_forward_strafe_theta)
+            fastest = ((w == w.max()) & (w > 0.0)) | ((w == w.min()) & (w < 0.0))
+            penalised |= slow & ~fastest
+        cost = np.where(penalised, self.penalty(ctx.resolution), np.abs(w) * o.prefer_forward_theta_scale)
+        return cost + self._turn_round(ctx), self._legal(cost.shape[0])
+
+    def _turn_round(self, ctx: CriticContext) -> np.ndarray:
+        """With the path behind the robot (its point ``sampling_distance`` ahead more than
+        ``angle_threshold`` off the heading), the angle from each trajectory's end heading to that
+        point, weighted to outweigh the most PathAlign + GoalAlign can charge for the turn (their
+        forward points move at most twice their distance): facing away from its path is a local
+        minimum of DWB's critics, which backing up used to escape (Nav2 answers it with the
+        RotationShimController, MPPI with its PathAngle critic)."""
+        o, k = self.options, len(ctx.trajectories)
+        path = ctx.local_path
+        seg = np.hypot(*np.diff(path[:, :2], axis=0).T)
+        along = np.concatenate(([0.0], np.cumsum(seg)))
+        target = path[min(int(np.searchsorted(along, o.prefer_forward_sampling_distance)), len(path) - 1)]
+        bearing = math.atan2(target[1] - ctx.pose.y, target[0] - ctx.pose.x)
+        if abs(float(wrap_angle(bearing - ctx.pose.theta))) <= o.prefer_forward_angle_threshold:
+            return np.zeros(k)
+        last = ctx.last
+        err = np.abs(wrap_angle(np.arctan2(target[1] - last[:, 1], target[0] - last[:, 0]) - last[:, 2]))
+        fpd = o.path_align_scale * o.path_align_forward_point_distance
+        fpd += o.goal_align_scale * o.goal_align_forward_point_distance
+        per_rad = 2.0 * (2.0 * fpd / ctx.resolution) / math.pi  # twice the alignment barrier, per radian
+        return per_rad * err / max(self.scale, 1e-9)
+
+
 class _Trend:
     """Sign history of one command axis (DWB ``OscillationCritic::CommandTrend``)."""
 
@@ -553,6 +621,7 @@ CRITIC_TYPES: dict[str, type] = {
         GoalAlign,
         RotateToGoal,
         Oscillation,
+        PreferForward,
         FoxHeading,
         FoxClearance,
         FoxVelocity,

@@ -29,8 +29,12 @@ DWB_CRITICS: tuple[str, ...] = (
 #: FoxClearance also applies Fox's admissible-velocity test instead of DWB's collision rejection.
 FOX_CRITICS: tuple[str, ...] = ("FoxHeading", "FoxClearance", "FoxVelocity")
 
+#: Added to ``DWB_CRITICS`` by :meth:`DwaOptions.for_robot` for differential/skid bases: a robot
+#: whose lidar and IR sensors look forwards should back up only when that is the only way.
+PREFER_FORWARD = "PreferForward"
+
 KNOWN_CRITICS: frozenset[str] = frozenset(
-    (*DWB_CRITICS, "BaseObstacle", "FoxHeading", "FoxClearance", "FoxVelocity")
+    (*DWB_CRITICS, "BaseObstacle", PREFER_FORWARD, "FoxHeading", "FoxClearance", "FoxVelocity")
 )
 
 
@@ -169,6 +173,29 @@ class DwaOptions:
     after which its flags reset: the veto then holds a stalled robot in place rather than
     preventing a dither (navdeck; DWB's flags only reset by motion, which a stalled robot never
     makes). <= 0: never."""
+    prefer_forward_scale: float = 1.0
+    """PreferForward.scale. DWB 1.0."""
+    prefer_forward_penalty: float = -1.0
+    """PreferForward.penalty: cost of a reversing sample, and of one slower than ``strafe_x`` that
+    hardly turns. Negative (navdeck default): automatic, the most a reversing sample can gain on
+    GoalDist + GoalAlign over one horizon (``(goal_dist_scale + goal_align_scale) * |min_vel_x| *
+    sim_time`` in cells), so progress alone never makes backing win; it still wins where every
+    forward or turning sample is illegal or much worse on the other critics. DWB's 1.0 is a
+    rounding error against its own GoalDist scale of 24 per cell."""
+    prefer_forward_strafe_x: float = 0.1
+    """PreferForward.strafe_x, m/s: slower forward samples that also turn slower than
+    ``strafe_theta`` get the penalty too (a base whose sensors look forwards). DWB 0.1."""
+    prefer_forward_strafe_theta: float = 0.2
+    """PreferForward.strafe_theta, rad/s. DWB 0.2."""
+    prefer_forward_theta_scale: float = 10.0
+    """PreferForward.theta_scale: cost per rad/s of turning (turning is not progress). DWB 10.0."""
+    prefer_forward_sampling_distance: float = 0.5
+    """Distance along the path (m) of the point whose direction tells whether the path lies behind
+    the robot (navdeck; Nav2 RotationShimController ``forward_sampling_distance`` 0.5)."""
+    prefer_forward_angle_threshold: float = math.pi / 2
+    """Above this angle (rad) between the heading and that point, PreferForward also charges each
+    trajectory its end heading's angle to the point, so the robot turns round to face its path
+    instead of backing along it (navdeck)."""
     fox_heading_scale: float = 2.0
     """Fox's alpha (heading term weight). Fox et al. 1997 use 2.0."""
     fox_clearance_scale: float = 0.2
@@ -223,7 +250,8 @@ class DwaOptions:
         ``footprint`` and ``robot_radius`` like ``robot.profiles.RobotProfile``), then ``overrides``.
 
         Speed limits come from the profile; ``max_speed_xy`` is the larger of the axis limits so the
-        omni base may use its full speed along each axis.
+        omni base may use its full speed along each axis. A differential or skid base that can
+        reverse (``min_vel_x`` < 0) gets the ``PreferForward`` critic too.
         """
         lim = profile.limits
         holonomic = profile.kinematics == "omni"
@@ -246,6 +274,9 @@ class DwaOptions:
             footprint=tuple(profile.footprint),
             robot_radius=profile.robot_radius if profile.robot_radius > 0 else 0.1,
         )
+        if not holonomic and lim.min_vel_x < 0.0:
+            # a base that can reverse but sees forwards: back up only when that is the only way
+            base = replace(base, critics=(*base.critics, PREFER_FORWARD))
         known = {f.name for f in fields(cls)}
         bad = set(overrides) - known
         if bad:
