@@ -42,6 +42,7 @@ from nav.types import (
     Path,
     Pose2D,
     Twist2D,
+    wrap_angle,
 )
 
 if TYPE_CHECKING:
@@ -240,7 +241,7 @@ class Navigation:
         self.navigator = Navigator.for_robot(
             self.profile,
             None,
-            NavigatorOptions(nominal_speed=0.5 * self.profile.limits.max_vel_x),
+            NavigatorOptions(nominal_speed=self.profile.limits.max_vel_x),
             request_plan=self._request_plan,
             goal_checker=GoalChecker(),
             progress_checker=ProgressChecker(),
@@ -582,12 +583,18 @@ class Navigation:
         assert out is not None
         self._active = False
         self._futures.clear()
+        goals = self.navigator.goals
+        # the goal it reached last, or the one it was heading for when it failed / was cancelled
+        i = out.goals_reached - 1 if out.kind == "reached" else out.goals_reached
+        goal = goals[min(max(i, 0), len(goals) - 1)] if goals else None
         self.last_outcome = {
             "kind": out.kind,
             "reason": out.reason,
             "message": out.message,
             "goals_reached": out.goals_reached,
             "t": round(now - self.session.started_at, 3),
+            **self._tolerances(),
+            **_offset(self.session.pose, goal),
         }
         self.session.add_event(
             "navigation",
@@ -683,11 +690,18 @@ class Navigation:
             "goals": [_pose(g) for g in goals],
             "distance_remaining": None if fb is None else round(fb.distance_remaining, 3),
             "eta_s": None if fb is None or not math.isfinite(fb.eta) else round(fb.eta, 1),
+            **self._tolerances(),
+            **_offset(self.session.pose, goal),
             "activity": "idle" if fb is None else fb.activity,
             "outcome": self.last_outcome,
             "recoveries": self.recoveries,
             "costmap_view": self.costmap_view,
         }
+
+    def _tolerances(self) -> dict[str, float]:
+        """The goal checker's tolerances: "reached" means within both (Nav2 names, m and rad)."""
+        xy, yaw = self.navigator.goal_checker.tolerances()
+        return {"xy_goal_tolerance": xy, "yaw_goal_tolerance": yaw}
 
     def path(self) -> Path | None:
         return self.navigator.path if self._active else None
@@ -753,6 +767,17 @@ class Navigation:
 
 def _pose(p: Pose2D) -> dict[str, float]:
     return {"x": round(p.x, 4), "y": round(p.y, 4), "theta": round(p.theta, 4)}
+
+
+def _offset(pose: Pose2D, goal: Pose2D | None) -> dict[str, float | None]:
+    """How far the (localized) robot is from ``goal``: straight-line distance (m) and heading error
+    (rad, goal minus robot), the quantities the goal checker compares with its tolerances."""
+    if goal is None:
+        return {"distance_to_goal": None, "yaw_to_goal": None}
+    return {
+        "distance_to_goal": round(pose.distance_to(goal), 3),
+        "yaw_to_goal": round(float(wrap_angle(goal.theta - pose.theta)), 4),
+    }
 
 
 def setup(runtime: Runtime) -> Navigation | None:

@@ -36,8 +36,29 @@ function renderQueue(t) {
   }));
 }
 
+const deg = (rad) => fmt((Math.abs(rad) * 180) / Math.PI, 0);
+const within = (n) => `within ${fmt(n.xy_goal_tolerance)} m and ${deg(n.yaw_goal_tolerance)}°`;
+
+// What "reached" means (the goal checker's tolerances) and how close the robot got.
+function renderResult(t) {
+  const nav = t.navigation;
+  const el = $("#goal-result");
+  let text = "";
+  if (nav && nav.xy_goal_tolerance !== undefined) {
+    const o = nav.outcome;
+    if (nav.active) {
+      text = `counts as reached ${within(nav)} of the goal; now ${fmt(nav.distance_to_goal)} m away`;
+    } else if (o && o.distance_to_goal !== undefined && o.distance_to_goal !== null) {
+      const off = `${fmt(o.distance_to_goal)} m and ${deg(o.yaw_to_goal)}° from the goal`;
+      text = o.kind === "reached" ? `reached ${within(o)}: stopped ${off}` : `${o.kind}: stopped ${off}`;
+    }
+  }
+  if (el.textContent !== text) el.textContent = text;
+}
+
 export function init() {
   onTelemetry(renderQueue);
+  onTelemetry(renderResult);
   $("#goal-form").addEventListener("submit", (ev) => {
     ev.preventDefault();
     const f = ev.target;
