@@ -315,3 +315,65 @@ def test_nav2_recovery_behaviours_run_then_goal_aborts() -> None:
         assert out["kind"] == "failed" and st.session.collisions == 0
     finally:
         st.session.close()
+
+
+def test_skid_robot_turns_round_instead_of_backing_along_a_route_behind_it() -> None:
+    """Issue 17: on a 5 m route the robot drove backwards at -0.15 m/s for long stretches. The
+    skid4 base can reverse (its profile's min_vel_x), but its lidar and IR look forwards: with the
+    PreferForward critic it turns round and drives forwards."""
+    world = World.from_yaml(stock_world_path("apartment"))
+    start, goal = Pose2D(3.0, 1.5, -math.pi / 2), Pose2D(1.0, 5.6, math.pi)  # the route starts behind it
+    stack = build_sim_stack(world.grid, world, start, seed=3)
+    try:
+        stack.localization.set_initial_pose(start)
+        stack.navigation.set_goals([goal])
+        s = stack.session
+        reversing = driving = 0.0
+        t0 = s.clock.now()
+        while stack.navigation.last_outcome is None and s.clock.now() - t0 < 120.0:
+            s.run_for(s.period)
+            if abs(s.velocity.vx) > 0.02:
+                driving += s.period
+                reversing += s.period if s.velocity.vx < -0.02 else 0.0
+        out = stack.navigation.last_outcome
+        assert out is not None and out["kind"] == "reached", out
+        assert driving > 10.0  # it did drive the route (about 5 m at up to 0.26 m/s)
+        assert reversing <= 0.5, f"{reversing:.2f} s of {driving:.2f} s driving was backwards"
+        assert s.collisions == 0
+    finally:
+        stack.session.close()
+
+
+def test_warm_up_runs_the_navigation_kernels_on_a_worker_before_any_goal(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """The first goal showed "waiting for a path" for 5.8 s: on a fresh checkout the first plan
+    compiled the A* kernels, and the first DWA cycle then compiled its kernels on the loop thread.
+    With ``warm_up`` (on by default with a real clock) the feature does that on a worker at
+    start-up, with its own planner and controllers."""
+    import threading
+
+    import app.features.navigation as feature
+    from nav.control.dwa import _prune
+    from nav.planning.grid_search import _run
+
+    threads: list[str] = []
+    real = feature.warm_up_navigation
+
+    def spy(*args, **kwargs):
+        threads.append(threading.current_thread().name)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(feature, "warm_up_navigation", spy)
+    st = apartment(localization="truth")
+    try:
+        assert st.navigation.warmed_up is None  # a simulated run on a virtual clock: not unless asked
+        navigation = feature.Navigation(st.session, st.localization, feature.NavigationOptions(warm_up=True))
+        assert navigation.warmed_up is not None
+        timings = navigation.warmed_up.result(timeout=600)
+    finally:
+        st.session.close()
+    assert threads and threads[0].startswith("worker")  # off the loop thread
+    assert set(timings) == {"costmaps", "plan", "dwa", "teb"}
+    assert _run.signatures and _prune.signatures  # the A* search and DWA's pruning are compiled
+    assert not [e for e in st.session.events if e["type"] == "navigation"]  # no goal was involved

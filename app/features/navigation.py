@@ -44,6 +44,7 @@ from nav.types import (
     Twist2D,
     wrap_angle,
 )
+from nav.warmup import warm_up_navigation
 
 if TYPE_CHECKING:
     from app.features.localization import Localization
@@ -196,6 +197,11 @@ class NavigationOptions:
     """Which costmap the 3D view shows as ``extras["costmap"]``."""
     wait_for_plans: bool | None = None
     """Block the tick until a requested plan is back; None: only with a virtual clock."""
+    warm_up: bool | None = None
+    """Compile (or load from numba's cache) the costmap, planner and controller kernels on a worker
+    at start-up (``nav.warmup``), so the first goal neither waits for the planner to compile nor
+    stalls the loop while DWA compiles; None: only with a real clock (a simulated run on a virtual
+    clock waits for nobody, and its CPU figures would count the warm-up)."""
     controller: Literal["dwa", "teb"] | None = None
     """Default local controller (Nav2 ``controller_plugins``); None: the profile's ``controller``.
     A goal request may pick the other one for itself."""
@@ -284,8 +290,29 @@ class Navigation:
         session.set_command_source(Mode.RECOVERING, self._recovery_command)
         session.modes.set_guard(Mode.NAVIGATING, self._guard)
         self._recovery_cmd: Twist2D | None = ZERO_TWIST
+        warm = not virtual if o.warm_up is None else o.warm_up
+        self.warmed_up: Future | None = session.workers.submit(self._warm_up) if warm else None
+        """The start-up warm-up's job: seconds per stage (``nav.warmup.warm_up_navigation``)."""
 
     # ------------------------------------------------------------------ costmaps
+    def _warm_up(self) -> dict[str, float]:
+        grid = self.localization.grid
+        o = self.options
+        try:
+            timings = warm_up_navigation(
+                self.profile,
+                o.planner,
+                self._costmap_options(False),
+                self._costmap_options(True),
+                grid.resolution if grid is not None else 0.05,
+                {"dwa": o.dwa_overrides, "teb": o.teb_overrides},
+            )
+        except Exception:  # a failed warm-up costs only time: the first goal compiles instead
+            log.exception("navigation warm-up failed")
+            return {}
+        log.info("navigation kernels ready: %s", ", ".join(f"{k} {v:.1f} s" for k, v in timings.items()))
+        return timings
+
     def _costmap_options(self, rolling: bool):
         from nav.costmap import CostmapOptions, InflationOptions, local_costmap_options
 
