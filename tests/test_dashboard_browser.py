@@ -345,6 +345,9 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
         " return [t.textContent, getComputedStyle(t).backgroundColor]; })()"
     )
     assert name in palette.BEHAVIOR_COLORS and bg == "rgb({}, {}, {})".format(*palette.BEHAVIOR_COLORS[name])
+    # the goal panel says what "reached" will mean (issue 17: "reached" 0.25 m short, no tolerance shown)
+    result = page.locator("#goal-result")
+    result.filter(has_text="counts as reached within 0.25 m and 14°").wait_for(timeout=LONG)
     shot(page, "goal")
     assert wait_until(page, lambda: not nav.state()["active"], timeout=90, step_ms=250)
     outcome = nav.state()["outcome"]
@@ -352,6 +355,10 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
         outcome,
         {"estimate": session.pose, "truth": session.driver.truth_pose, "quality": loc.quality},
     )
+    # ... and, once there, how close the robot stopped
+    result.filter(has_text="reached within 0.25 m and 14°: stopped").wait_for(timeout=LONG)
+    assert f"stopped {outcome['distance_to_goal']:.2f} m" in result.inner_text()
+    shot(page, "goal_reached")
     assert server.runtime.session.pose.distance_to(start) > 0.1
 
 

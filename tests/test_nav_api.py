@@ -82,8 +82,14 @@ def test_click_to_goal_end_to_end(server: EmbeddedServer, api: httpx.Client) -> 
     state = wait_for(api, lambda s: s["state"] == "following", 10.0)
     assert state["goal"]["y"] == pytest.approx(1.2) and len(state["path"]) > 2
     assert api.get("/api/robot").json()["mode"] == "navigating"
+    # what "reached" will mean (the goal checker's tolerances) and how far the robot is now
+    assert state["xy_goal_tolerance"] == 0.25 and state["yaw_goal_tolerance"] == 0.25
+    assert state["distance_to_goal"] > 0.25 and state["eta_s"] is not None
     state = wait_for(api, lambda s: s["outcome"] is not None, 60.0)
     assert state["outcome"]["kind"] == "reached", state
+    out = state["outcome"]  # the final distance and heading error, and the tolerances they met
+    assert out["xy_goal_tolerance"] == 0.25 and out["yaw_goal_tolerance"] == 0.25
+    assert 0.0 <= out["distance_to_goal"] <= 0.25 and abs(out["yaw_to_goal"]) <= 0.25
     truth = server.runtime.session.driver.truth_pose
     assert truth.distance_to(Pose2D(goal["x"], goal["y"])) < 0.35
     assert api.get("/api/robot").json()["mode"] == "idle"
