@@ -31,11 +31,14 @@ def test_kidnapped_robot_relocalizes_and_reaches_its_goal_within_30_s() -> None:
 def test_a_robot_refound_a_little_off_on_a_wall_recovers_as_lost() -> None:
     # Trial 1: the filter re-finds the carried robot 0.36 m off with a good fit (0.88), its
     # footprint on a wall of the map; nothing moves, so the filter never updates. Stuck there, the
-    # navigator blames localization (relocalize, which turns although the estimate is in a wall).
+    # navigator blames localization: the localization_divergence list runs (spin_until_matched,
+    # then relocalize, which turns although the estimate is in a wall). Before PreferForward three
+    # planner-failure recoveries ran first and both of the list ran (back on its way after 30.7 s);
+    # now the first of the list suffices (8.3 s).
     ks = kidnap_trials(2, only=frozenset({1}))
     (t,) = ks.trials
     assert t.ok, t
-    assert ("localization_divergence", "relocalize") in t.recoveries, t.recoveries
+    assert any(trigger == "localization_divergence" for trigger, _ in t.recoveries), t.recoveries
     assert t.result.result.collisions == 0
 
 
