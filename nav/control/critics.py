@@ -370,10 +370,11 @@ class PreferForward(_Stateless):
     costs ``theta_scale * |w|`` (turning is not progress). DWB ``PreferForwardCritic``.
 
     navdeck's default penalty is automatic (``prefer_forward_penalty`` < 0): the most a reversing
-    sample can gain over one horizon on GoalDist + GoalAlign, so a goal behind the robot makes it
-    turn round rather than reverse the whole way, while a robot whose forward and turning samples
-    are all illegal (nose in a dead end) still backs out. Off inside the goal window, where
-    RotateToGoal alone decides."""
+    sample can gain over one horizon on the path and goal critics (GoalDist, GoalAlign, PathDist,
+    PathAlign), so a goal behind the robot makes it turn round rather than reverse the whole way,
+    while a robot whose forward and turning samples are illegal (nose in a dead end too narrow to
+    turn in) still backs out. Off inside the goal window, where RotateToGoal alone decides. The
+    strafe rule and the turn-round term are navdeck rules, explained where they are computed."""
 
     name = "PreferForward"
 

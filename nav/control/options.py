@@ -178,10 +178,11 @@ class DwaOptions:
     prefer_forward_penalty: float = -1.0
     """PreferForward.penalty: cost of a reversing sample, and of one slower than ``strafe_x`` that
     hardly turns. Negative (navdeck default): automatic, the most a reversing sample can gain on
-    GoalDist + GoalAlign over one horizon (``(goal_dist_scale + goal_align_scale) * |min_vel_x| *
-    sim_time`` in cells), so progress alone never makes backing win; it still wins where every
-    forward or turning sample is illegal or much worse on the other critics. DWB's 1.0 is a
-    rounding error against its own GoalDist scale of 24 per cell."""
+    the path and goal critics over one horizon (the sum of the GoalDist, GoalAlign, PathDist and
+    PathAlign scales x ``|min_vel_x| * sim_time`` in cells, divided by ``prefer_forward_scale``),
+    so progress alone never makes backing win; it still wins where the forward and turning
+    samples are illegal or much worse on the other critics. DWB's 1.0 is a rounding error against
+    its own GoalDist scale of 24 per cell."""
     prefer_forward_strafe_x: float = 0.1
     """PreferForward.strafe_x, m/s: slower forward samples that also turn slower than
     ``strafe_theta`` get the penalty too (a base whose sensors look forwards). DWB 0.1."""
