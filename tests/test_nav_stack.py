@@ -317,13 +317,15 @@ def test_nav2_recovery_behaviours_run_then_goal_aborts() -> None:
         st.session.close()
 
 
-def test_skid_robot_turns_round_instead_of_backing_along_a_route_behind_it() -> None:
+@pytest.mark.parametrize("controller", ["dwa", "teb"])
+def test_skid_robot_turns_round_instead_of_backing_along_a_route_behind_it(controller: str) -> None:
     """Issue 17: on a 5 m route the robot drove backwards at -0.15 m/s for long stretches. The
     skid4 base can reverse (its profile's min_vel_x), but its lidar and IR look forwards: with the
-    PreferForward critic it turns round and drives forwards."""
+    PreferForward critic (DWA) or TEB's forward-drive weight it turns round and drives forwards
+    (before: DWA reversed 33.8 s of 33.8 s, TEB 1.5 s of 24.2 s)."""
     world = World.from_yaml(stock_world_path("apartment"))
     start, goal = Pose2D(3.0, 1.5, -math.pi / 2), Pose2D(1.0, 5.6, math.pi)  # the route starts behind it
-    stack = build_sim_stack(world.grid, world, start, seed=3)
+    stack = build_sim_stack(world.grid, world, start, seed=3, controller=controller)
     try:
         stack.localization.set_initial_pose(start)
         stack.navigation.set_goals([goal])

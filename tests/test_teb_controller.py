@@ -335,3 +335,14 @@ def test_feasibility_treats_lethal_cells_as_points_at_their_centres() -> None:
     edge = np.array([[0.1, 1.0, 0.0]])
     assert not centre_collisions(cm, edge, poly)[0]
     assert centre_collisions(cm, edge, poly, None, unknown_is_lethal=True)[0]
+
+
+def test_reversing_skid_base_gets_teb_forward_drive_weight_omni_does_not() -> None:
+    from nav.control.teb_options import FORWARD_DRIVE_WEIGHT, TebOptions
+    from robot.profiles import load_profile
+
+    assert TebOptions.for_robot(load_profile("skid4")).weight_kinematics_forward_drive == FORWARD_DRIVE_WEIGHT
+    assert TebOptions.for_robot(load_profile("omni4")).weight_kinematics_forward_drive == 1.0
+    # an explicit override still wins
+    opts = TebOptions.for_robot(load_profile("skid4"), weight_kinematics_forward_drive=1.0)
+    assert opts.weight_kinematics_forward_drive == 1.0

@@ -18,6 +18,12 @@ class TebConfigError(ValueError):
     """A TEB option is out of range; the message names the field."""
 
 
+FORWARD_DRIVE_WEIGHT = 1000.0
+"""``weight_kinematics_forward_drive`` for a differential or skid base that can reverse: the
+original TEB documents "around 1000 almost prevents backward driving" (with its default 1.0 the
+skid4 robot reversed 1.5 s while turning round at the start of a route behind it)."""
+
+
 @dataclass(frozen=True)
 class TebOptions:
     """Every knob of :class:`nav.control.teb.TebController` (SI units, radians)."""
@@ -121,7 +127,9 @@ class TebOptions:
     weight_kinematics_nh: float = 1000.0
     """Weight of the non-holonomic constraint (diff drive). TEB 1000."""
     weight_kinematics_forward_drive: float = 1.0
-    """Weight that prefers driving forwards (diff drive). TEB 1."""
+    """Weight that prefers driving forwards (diff drive). TEB 1 ("still allows driving
+    backwards"); ``for_robot`` gives a differential or skid base that can reverse
+    ``FORWARD_DRIVE_WEIGHT``."""
     weight_kinematics_turning_radius: float = 1.0
     """Weight of ``min_turning_radius``. TEB 1."""
     weight_optimaltime: float = 1.0
@@ -204,6 +212,9 @@ class TebOptions:
             footprint=tuple(profile.footprint),
             robot_radius=profile.robot_radius if profile.robot_radius > 0 else 0.1,
         )
+        if not holonomic and lim.min_vel_x < 0.0:
+            # a base that can reverse but sees forwards (DWA gets PreferForward for the same reason)
+            base = replace(base, weight_kinematics_forward_drive=FORWARD_DRIVE_WEIGHT)
         known = {f.name for f in fields(cls)}
         bad = sorted(set(overrides) - known)
         if bad:
