@@ -33,7 +33,8 @@ function connect() {
       document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
     }
     if (m.type === "error") {
-      message(`teleop refused: ${m.error}${m.allowed ? ` (allowed modes: ${m.allowed.join(", ")})` : ""}`, "error");
+      const allowed = m.allowed && m.allowed.length ? ` (allowed modes: ${m.allowed.join(", ")})` : "";
+      message(`teleop refused: ${m.error}${allowed}`, "error");
       if (m.control) document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
     }
   };
