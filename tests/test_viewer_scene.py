@@ -432,3 +432,59 @@ def test_every_recovery_behaviour_has_its_own_colour() -> None:
     assert not missing
     colours = [palette.BEHAVIOR_COLORS[n] for n in BEHAVIOR_NAMES]
     assert len(set(colours)) == len(colours)
+
+
+def test_loop_closures_only_while_mapping(viewer: Viewer) -> None:
+    """Issue 17 item 8: loop-closure lines belong to the mapping session; once mapping ends or navigation
+    starts they would hide the path."""
+    edges = np.array([[[0.0, 0.0], [1.0, 1.0]], [[1.0, 0.0], [2.0, 2.0]]])
+    viewer.apply(snap(mode="mapping", extras={"graph_edges": edges}))
+    assert viewer.is_shown("/graph/edges")
+    assert viewer.server.scene.get_handle_by_name("/graph/edges").points.shape == (2, 2, 3)
+    for mode in ("idle", "navigating", "teleop"):
+        viewer.apply(snap(mode=mode, extras={"graph_edges": edges}))  # the map keeps its graph
+        assert not viewer.is_shown("/graph/edges"), mode
+    viewer.apply(snap(mode="mapping", extras={"graph_edges": edges}))
+    assert viewer.is_shown("/graph/edges")
+
+
+def test_viewer_prints_no_port_of_its_own(capfd: pytest.CaptureFixture[str]) -> None:
+    """Issue 17 item 8: users open the dashboard's address; viser's internal port is not for them."""
+    v = Viewer(SnapshotBus(), footprint=FOOTPRINT)
+    v.start()
+    port = v.port
+    v.stop()
+    out, err = capfd.readouterr()
+    assert str(port) not in out + err and "viser" not in (out + err).lower(), out + err
+
+
+def test_layers_and_click_mode_are_per_tab(viewer: Viewer) -> None:
+    """Issue 17 item 7: a layer unticked or a click mode chosen in one tab leaves every other tab's."""
+    viewer.apply(snap(particles=np.zeros((3, 3))))
+    viewer.set_layer_enabled("Particles", False, "tab-a")
+    viewer.set_click_kind("tab-a", "initial_pose")
+    assert not viewer.is_shown("/particles", "tab-a")
+    assert viewer.is_shown("/particles", "tab-b") and viewer.is_shown("/particles")
+    assert viewer.click_kind("tab-a") == "initial_pose" and viewer.click_kind("tab-b") == "goal"
+    with pytest.raises(ValueError):
+        viewer.set_click_kind("tab-a", "teleport")
+
+
+def test_initial_pose_click_is_one_shot(viewer: Viewer) -> None:
+    """Issue 17 item 5: one click sets one initial pose, then the tab's clicks set goals; a refusal keeps
+    the mode (the operator tries again)."""
+    got: list[tuple[str, str]] = []
+    answers = iter(["outside the map", None, None])
+    viewer.on_pose_input = lambda kind, pose, tab: got.append((kind, tab)) or next(answers)
+
+    class Ev:
+        ray_origin = (0.0, 0.0, 5.0)
+        ray_direction = (0.6, 0.0, -0.8)
+
+    viewer.set_click_kind("", "initial_pose")
+    viewer._on_scene_click(Ev())  # type: ignore[arg-type]  # refused
+    assert viewer.click_kind("") == "initial_pose"
+    viewer._on_scene_click(Ev())  # type: ignore[arg-type]  # taken
+    assert viewer.click_kind("") == "goal"
+    viewer._on_scene_click(Ev())  # type: ignore[arg-type]
+    assert got == [("initial_pose", ""), ("initial_pose", ""), ("goal", "")]
