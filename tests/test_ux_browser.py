@@ -289,6 +289,11 @@ def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: Embedde
         page.get_by_label("initial pose", exact=True).check()
         assert wait_until(page, lambda: viewer.click_kind(tab_a) == "initial_pose", timeout=15)
         assert viewer.click_kind(tab_b) == "goal"
+        picker = page.frame_locator("#viewer").get_by_role("combobox", name="Click sets")
+        assert wait_until(page, lambda: picker.input_value() == "initial pose", timeout=15)  # A's view
+        assert (
+            other.frame_locator("#viewer").get_by_role("combobox", name="Click sets").input_value() == "goal"
+        )
         assert other.locator("input[name=click-mode][value=goal]").is_checked()
         shot(page, "tab_a_map_off")
         shot(other, "tab_b_map_on")
