@@ -170,7 +170,7 @@ def test_refused_3d_view_click_reaches_messages_and_toast(page, server: Embedded
     shows why and what to do, in its messages and in the toast by the mode badge, above the fold."""
     loc = server.runtime.features["localization"]
     assert not loc.localized
-    view_tab(page)
+    assert wait_until(page, lambda: server.runtime.viewer.server.get_clients(), timeout=60)
     page.mouse.click(*ground_click(page, server))
     page.wait_for_selector(
         "#messages li.error:has-text('goal refused (3d view): not localized: set the initial pose')",
