@@ -34,7 +34,8 @@ function connect() {
     }
     if (m.type === "error") {
       const allowed = m.allowed && m.allowed.length ? ` (allowed modes: ${m.allowed.join(", ")})` : "";
-      message(`teleop refused: ${m.error}${allowed}`, "error");
+      const todo = m.control && m.control.holder ? ` (${m.control.holder.name || "another client"} holds control: press Take control to drive)` : "";
+      message(`teleop refused: ${m.error}${allowed}${todo}`, "error");
       if (m.control) document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
     }
   };
