@@ -34,7 +34,8 @@ function connect() {
     }
     if (m.type === "error") {
       const allowed = m.allowed && m.allowed.length ? ` (allowed modes: ${m.allowed.join(", ")})` : "";
-      const todo = m.control && m.control.holder ? ` (${m.control.holder.name || "another client"} holds control: press Take control to drive)` : "";
+      const other = m.control && m.control.holder && !state.driving; // refused because someone else drives
+      const todo = other ? ` (${m.control.holder.name || "another client"} holds control: press Take control to drive)` : "";
       message(`teleop refused: ${m.error}${allowed}${todo}`, "error");
       if (m.control) document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
     }
