@@ -285,9 +285,10 @@ def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: Embedde
     ctx_b, other = new_page(browser)
     try:
         other.goto(server.url + "/", wait_until="commit")  # "load" would wait for the 3D view's bundle
-        other.wait_for_selector("body[data-view-ready='1']", timeout=LONG)
         tab_b = view_tab(other)
         assert tab_a != tab_b
+        # two software-rendered views on a loaded machine: wait for B's view to connect, not to draw
+        assert wait_until(other, lambda: tab_b in [c.tab for c in viewer.tabs.clients.values()], timeout=240)
         box_b = other.frame_locator("#viewer").get_by_role("checkbox", name="Map", exact=True)
         box_b.wait_for(timeout=LONG)
         assert box_b.is_checked() and viewer.is_shown("/map", tab_b)
@@ -297,8 +298,11 @@ def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: Embedde
             other.frame_locator("#viewer").get_by_role("combobox", name="Click sets").input_value() == "goal"
         )
         assert other.locator("input[name=click-mode][value=goal]").is_checked()
-        other.wait_for_timeout(2000)  # map tiles drawn
-        assert view_luma(other) > dark_a + 5.0, (lit_a, dark_a)  # B draws the map A hides
+        # B draws the map A hides (polled: B's first frames can take a while in software WebGL)
+        assert wait_until(other, lambda: view_luma(other) > dark_a + 5.0, timeout=120, step_ms=2000), (
+            lit_a,
+            dark_a,
+        )
         shot(page, "tab_a_map_off")
         shot(other, "tab_b_map_on")
     finally:
