@@ -13,7 +13,8 @@ app.security) and routes added later by other modules.
   Content-Security-Policy. The dashboard's own pages load only same-origin scripts; viser's client page
   is one HTML file whose bundle is inlined and unpacked at run time (inline script, eval, blob and
   wasm workers), so ``/viz/`` pages get a policy that allows exactly that but still only from 'self';
-  FastAPI's /docs and /redoc load Swagger UI / ReDoc from jsDelivr.
+  /docs and /redoc load Swagger UI / ReDoc from this server too (app/api_docs.py), with the inline
+  script FastAPI's page builders write.
 - Websockets (RFC 6455 section 10.2): browsers always send ``Origin`` on an upgrade and a page on
   another site could otherwise drive the robot with the operator's cookies (cross-site websocket
   hijacking). An upgrade whose Origin is not this server's own Host (or listed in
@@ -58,11 +59,9 @@ VIZ_CSP = (
     "object-src 'none'; base-uri 'self'"
 )
 DOCS_CSP = (
-    "default-src 'self'; script-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net; "
-    "style-src 'self' 'unsafe-inline' https://cdn.jsdelivr.net https://fonts.googleapis.com; "
-    "font-src 'self' https://fonts.gstatic.com; img-src 'self' data: https://fastapi.tiangolo.com "
-    "https://cdn.redoc.ly; worker-src 'self' blob:; connect-src 'self'; frame-ancestors 'self'; "
-    "object-src 'none'; base-uri 'self'"
+    "default-src 'self'; script-src 'self' 'unsafe-inline'; style-src 'self' 'unsafe-inline'; "
+    "font-src 'self' data:; img-src 'self' data:; worker-src 'self' blob:; connect-src 'self'; "
+    "frame-ancestors 'self'; object-src 'none'; base-uri 'self'"
 )
 COMMON_HEADERS: tuple[tuple[bytes, bytes], ...] = (
     (b"x-content-type-options", b"nosniff"),

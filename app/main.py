@@ -12,10 +12,11 @@ from typing import Any
 
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
-from fastapi.responses import JSONResponse
+from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 import app.api.routes as routes_pkg
+from app.api_docs import mount_api_docs
 from app.runtime import Runtime
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
@@ -111,6 +112,8 @@ def create_app(runtime: Runtime) -> FastAPI:
         summary="Operator station and navigation server for small lidar robots",
         description=LEASE_RULES,
         lifespan=lifespan,
+        docs_url=None,  # FastAPI's pages load their assets from a CDN: served offline by app.api_docs
+        redoc_url=None,
     )
     app.state.runtime = runtime
     app.state.guard = guard
@@ -135,6 +138,12 @@ def create_app(runtime: Runtime) -> FastAPI:
     from app.ratelimit import document_rate_limits
 
     document_rate_limits(app)  # 429 on the control endpoints (limited in app.security)
+
+    mount_api_docs(app)
+
+    @app.get("/favicon.ico", include_in_schema=False)
+    def favicon() -> FileResponse:  # what browsers ask for on pages without a <link rel="icon"> (/viz/)
+        return FileResponse(FRONTEND_DIR / "favicon.svg", media_type="image/svg+xml")
 
     from app.viewer.relay import make_router
 

@@ -50,6 +50,17 @@ RESET_ONLY = frozenset({(Mode.ESTOP, Mode.IDLE), (Mode.FAULT, Mode.IDLE)})
 Guard = Callable[[], str | None]  # returns a refusal reason, or None to allow
 
 
+def driving_hint(mode: Mode) -> str:
+    """What an operator does to drive by hand when ``mode`` refuses it (shown with the refusal)."""
+    if mode == Mode.ESTOP:
+        return "press Reset to release the e-stop, then drive"
+    if mode == Mode.FAULT:
+        return "remove the fault's cause, press Reset, then drive"
+    if mode in (Mode.NAVIGATING, Mode.RECOVERING, Mode.LOCALIZING):
+        return f"cancel {mode.value} (Cancel or Idle) to drive by hand"
+    return "choose Teleop or Idle, then drive"
+
+
 @dataclass
 class TransitionRefused(Exception):
     current: Mode

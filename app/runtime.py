@@ -75,16 +75,30 @@ class Runtime:
             )
             self.viewer.start()
 
-    def on_pose_input(self, kind: str, pose: Pose2D) -> None:
-        """A pose set in the 3D view (viser's thread): hand it to the feature that handles this kind."""
+    def on_pose_input(self, kind: str, pose: Pose2D, tab: str = "") -> str | None:
+        """A pose set in the 3D view of browser tab ``tab`` (viser's thread): hand it to the feature that
+        handles this kind. A refusal is returned (the view shows it) and recorded as an event that the
+        tab's dashboard shows in its messages (telemetry ``notices``)."""
         handler = self.pose_input_handlers.get(kind)
-        if handler is None:
-            self.session.add_event("refused", what=kind, reason=f"nothing handles a {kind} yet")
-            return
-        try:
-            handler(pose)
-        except Exception as exc:  # a refusal (e.g. goal in a wall) is shown, never raised into viser
-            self.session.add_event("refused", what=kind, reason=str(exc))
+        label = kind.replace("_", " ")
+        reason = f"nothing handles a {label} yet" if handler is None else None
+        if handler is not None:
+            try:
+                handler(pose)
+            except Exception as exc:  # a refusal (e.g. goal in a wall) is shown, never raised into viser
+                reason = str(exc)
+        if reason is None:
+            if kind == "initial_pose":
+                self.session.add_event(
+                    "notice",
+                    text=f"initial pose set at x {pose.x:.2f} y {pose.y:.2f}: "
+                    "a click in the 3D view now sets a goal",
+                    tab=tab,
+                    click_mode="goal",
+                )
+            return None
+        self.session.add_event("refused", what=kind, reason=reason, via="3d view", tab=tab)
+        return reason
 
     def close(self) -> None:
         for name, handle in reversed(list(self.features.items())):

@@ -86,6 +86,7 @@ POLICY: tuple[Rule, ...] = (
     Rule(READ, "/style.css", Need.PUBLIC),
     Rule(READ, "/js/", Need.PUBLIC),
     Rule(READ, "/favicon.ico", Need.PUBLIC),
+    Rule(READ, "/favicon.svg", Need.PUBLIC),
     Rule(READ, "/", Need.SIGNED_IN),
 )
 

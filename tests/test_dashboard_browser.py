@@ -307,8 +307,10 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
     truth = session.driver.truth_pose
     resets = loc.resets
     viewer = server.runtime.viewer
+    tab = page.evaluate("window.__navdeck && document.querySelector('#viewer').contentWindow.__navdeckTab")
+    assert tab, "the 3D view did not choose a tab token"
     page.get_by_label("initial pose", exact=True).check()
-    assert wait_until(page, lambda: viewer.click_mode.value == "initial pose", timeout=15)
+    assert wait_until(page, lambda: viewer.click_kind(tab) == "initial_pose", timeout=15)
     _, at = visible_ground(page, server, np.array([[truth.x, truth.y]]))
     page.mouse.click(*at)
     assert wait_until(page, lambda: loc.resets > resets, timeout=15), (
@@ -319,8 +321,9 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
     )
     told = next(e for e in reversed(list(session.events)) if e.get("type") == "initial_pose")["pose"]
     assert np.hypot(told[0] - truth.x, told[1] - truth.y) < 0.1, (told, truth)
-    page.get_by_label("goal", exact=True).check()
-    assert wait_until(page, lambda: viewer.click_mode.value == "goal", timeout=15)
+    # one click = one initial pose: this tab's clicks set goals again, and its dashboard says so
+    assert wait_until(page, lambda: viewer.click_kind(tab) == "goal", timeout=15)
+    page.wait_for_function("document.querySelector('input[value=goal]').checked", timeout=LONG)
     start = session.pose
     # A goal on open floor (outside every obstacle's inflation: this test is about the click reaching the
     # navigator, not about squeezing between chair legs) 1-4 m away, where a click reaches the view.

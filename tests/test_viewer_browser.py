@@ -26,7 +26,7 @@ pytestmark = [
 def test_browser_renders_viewer_and_click_sets_goal() -> None:
     sync_api = pytest.importorskip("playwright.sync_api")
     got: list[tuple[str, Pose2D]] = []
-    viewer = Viewer(SnapshotBus(), footprint=FOOTPRINT, on_pose_input=lambda k, p: got.append((k, p)))
+    viewer = Viewer(SnapshotBus(), footprint=FOOTPRINT, on_pose_input=lambda k, p, _tab: got.append((k, p)))
     viewer.start()
     try:
         path = Path(np.column_stack((np.linspace(0, 8, 40), np.linspace(0, 4, 40), np.zeros(40))))

@@ -100,7 +100,7 @@ async def drain(ws: websockets.ClientConnection, seconds: float) -> list[dict]:
 
 def test_relay_streams_scene_and_click_reaches_callback(viewer: Viewer) -> None:
     got: list[tuple[str, Pose2D]] = []
-    viewer.on_pose_input = lambda kind, pose: got.append((kind, pose))
+    viewer.on_pose_input = lambda kind, pose, _tab: got.append((kind, pose))
     viewer.apply(snap(pose=Pose2D(0.0, 0.0, 0.0), grid=office_grid(), grid_version=1, scan=make_scan()))
 
     async def session() -> tuple[list[dict], list[dict]]:

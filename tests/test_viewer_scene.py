@@ -198,10 +198,10 @@ def test_optional_layers_and_checkboxes(viewer: Viewer) -> None:
     viewer.apply(s0)
     s = viewer.server.scene
     assert not viewer.is_shown("/costmap")  # hidden by default, like Rviz; its checkbox shows it
-    assert s.get_handle_by_name("/costmap").visible is False  # and really hidden in the scene
     viewer.set_layer_enabled("Costmap", True)
-    for node in ("/costmap", "/plan/local", "/goal", "/graph/edges"):
+    for node in ("/costmap", "/plan/local", "/goal"):
         assert viewer.is_shown(node), node
+    assert not viewer.is_shown("/graph/edges")  # loop closures are for the mapping session only
     assert s.get_handle_by_name("/plan/local/samples").points.shape == (30 * 11, 2, 3)
     best = s.get_handle_by_name("/plan/local/best").points
     np.testing.assert_allclose(best[:, 0, :2], samples[4, :-1], atol=1e-5)
@@ -210,14 +210,12 @@ def test_optional_layers_and_checkboxes(viewer: Viewer) -> None:
     np.testing.assert_allclose(
         Pose2D(3.0, 1.0, 1.0).transform_points(wp[:, :2].astype(float)), [[1, 1], [2, 0.5]], atol=1e-3
     )
-    assert s.get_handle_by_name("/graph/edges").points.shape == (2, 2, 3)
     assert s.get_handle_by_name("/robot/label").text == "spin"
     assert viewer.costmap_layer.encodes == 1
     assert "**navigating**" in viewer.status.content and "spin" in viewer.status.content
 
     viewer.set_layer_enabled("Costmap", False)
     assert not viewer.is_shown("/costmap")
-    assert s.get_handle_by_name("/costmap").visible is False
     viewer.set_layer_enabled("Costmap", True)
     assert viewer.is_shown("/costmap")
     viewer.set_layer_enabled("Particles", False)
@@ -279,7 +277,7 @@ def test_pose_input_geometry() -> None:
 
 def test_click_and_drag_call_on_pose_input(viewer: Viewer) -> None:
     got: list[tuple[str, Pose2D]] = []
-    viewer.on_pose_input = lambda kind, pose: got.append((kind, pose))
+    viewer.on_pose_input = lambda kind, pose, tab: got.append((kind, pose))
     viewer.apply(snap(pose=Pose2D(0.0, 0.0, 0.2)))
 
     class Ev:
@@ -287,7 +285,7 @@ def test_click_and_drag_call_on_pose_input(viewer: Viewer) -> None:
         ray_direction = (0.6, 0.0, -0.8)
 
     viewer._on_scene_click(Ev())  # type: ignore[arg-type]
-    viewer.click_mode.value = "initial pose"
+    viewer.set_click_kind("", "initial_pose")
     viewer._on_scene_click(Ev())  # type: ignore[arg-type]
     assert (
         got[0][0] == "goal" and got[0][1].x == pytest.approx(3.75) and got[0][1].theta == pytest.approx(0.0)
@@ -363,7 +361,7 @@ def test_recovery_markers_where_attempts_started(viewer: Viewer) -> None:
         np.testing.assert_allclose(lab.position[:2], m[:2])
 
     viewer.set_layer_enabled("Recoveries", False)
-    assert not viewer.is_shown("/recoveries") and s.get_handle_by_name("/recoveries").visible is False
+    assert not viewer.is_shown("/recoveries")
     viewer.set_layer_enabled("Recoveries", True)
     assert viewer.is_shown("/recoveries")
 
@@ -434,3 +432,59 @@ def test_every_recovery_behaviour_has_its_own_colour() -> None:
     assert not missing
     colours = [palette.BEHAVIOR_COLORS[n] for n in BEHAVIOR_NAMES]
     assert len(set(colours)) == len(colours)
+
+
+def test_loop_closures_only_while_mapping(viewer: Viewer) -> None:
+    """Issue 17 item 8: loop-closure lines belong to the mapping session; once mapping ends or navigation
+    starts they would hide the path."""
+    edges = np.array([[[0.0, 0.0], [1.0, 1.0]], [[1.0, 0.0], [2.0, 2.0]]])
+    viewer.apply(snap(mode="mapping", extras={"graph_edges": edges}))
+    assert viewer.is_shown("/graph/edges")
+    assert viewer.server.scene.get_handle_by_name("/graph/edges").points.shape == (2, 2, 3)
+    for mode in ("idle", "navigating", "teleop"):
+        viewer.apply(snap(mode=mode, extras={"graph_edges": edges}))  # the map keeps its graph
+        assert not viewer.is_shown("/graph/edges"), mode
+    viewer.apply(snap(mode="mapping", extras={"graph_edges": edges}))
+    assert viewer.is_shown("/graph/edges")
+
+
+def test_viewer_prints_no_port_of_its_own(capfd: pytest.CaptureFixture[str]) -> None:
+    """Issue 17 item 8: users open the dashboard's address; viser's internal port is not for them."""
+    v = Viewer(SnapshotBus(), footprint=FOOTPRINT)
+    v.start()
+    port = v.port
+    v.stop()
+    out, err = capfd.readouterr()
+    assert str(port) not in out + err and "viser" not in (out + err).lower(), out + err
+
+
+def test_layers_and_click_mode_are_per_tab(viewer: Viewer) -> None:
+    """Issue 17 item 7: a layer unticked or a click mode chosen in one tab leaves every other tab's."""
+    viewer.apply(snap(particles=np.zeros((3, 3))))
+    viewer.set_layer_enabled("Particles", False, "tab-a")
+    viewer.set_click_kind("tab-a", "initial_pose")
+    assert not viewer.is_shown("/particles", "tab-a")
+    assert viewer.is_shown("/particles", "tab-b") and viewer.is_shown("/particles")
+    assert viewer.click_kind("tab-a") == "initial_pose" and viewer.click_kind("tab-b") == "goal"
+    with pytest.raises(ValueError):
+        viewer.set_click_kind("tab-a", "teleport")
+
+
+def test_initial_pose_click_is_one_shot(viewer: Viewer) -> None:
+    """Issue 17 item 5: one click sets one initial pose, then the tab's clicks set goals; a refusal keeps
+    the mode (the operator tries again)."""
+    got: list[tuple[str, str]] = []
+    answers = iter(["outside the map", None, None])
+    viewer.on_pose_input = lambda kind, pose, tab: got.append((kind, tab)) or next(answers)
+
+    class Ev:
+        ray_origin = (0.0, 0.0, 5.0)
+        ray_direction = (0.6, 0.0, -0.8)
+
+    viewer.set_click_kind("", "initial_pose")
+    viewer._on_scene_click(Ev())  # type: ignore[arg-type]  # refused
+    assert viewer.click_kind("") == "initial_pose"
+    viewer._on_scene_click(Ev())  # type: ignore[arg-type]  # taken
+    assert viewer.click_kind("") == "goal"
+    viewer._on_scene_click(Ev())  # type: ignore[arg-type]
+    assert got == [("initial_pose", ""), ("initial_pose", ""), ("goal", "")]

@@ -186,6 +186,13 @@ class Mapping:
             self.run_id = None
             self.saved_map_id = None
         self.session.add_event("mapping", status="started")
+        was = self.started_pose
+        self.session.add_event(
+            "notice",
+            text="mapping started: the new map's frame begins where the robot stands, so its pose now "
+            f"counts from (0, 0) (it was x {was.x:.2f} y {was.y:.2f} on the previous map); save the map "
+            "to keep this frame",
+        )
 
     def stop(self) -> None:
         """Leave MAPPING (to IDLE); the map is kept for saving. Raises ``TransitionRefused``."""

@@ -38,6 +38,28 @@ _LOADER = re.compile(r'<script data-p="([^"]*)" data-ss="(\d+)" data-cs="(\d+)">
 _WASM = re.compile(r'const gzWasm="((?:[^"\\]|\\.)*)"')
 
 
+# Runs before the client: the page picks a random token for this browser tab (kept across reconnects,
+# since the page stays) and connects to ``/viz?tab=<token>`` through viser's own ``?websocket=`` option.
+# The relay hands the token to viser so the server keeps this tab's layers and click mode (tabs.py); the
+# dashboard reads ``__navdeckTab`` from its iframe to address the same view. Replays (``playbackPath``)
+# have no websocket.
+TAB_SCRIPT = """// navdeck: this tab's view token (per-tab layers and click mode).
+{
+  const q = new URLSearchParams(location.search);
+  const given = /[?&]tab=([A-Za-z0-9_-]+)/.exec(q.get("websocket") || "");
+  if (given) globalThis.__navdeckTab = given[1]; // a reload of a page that has its token already
+  else if (!q.has("websocket") && !q.has("playbackPath")) {
+    const bytes = crypto.getRandomValues(new Uint8Array(12));
+    const tab = Array.from(bytes, (b) => b.toString(16).padStart(2, "0")).join("");
+    globalThis.__navdeckTab = tab;
+    const base = location.href.split("?")[0].replace(/\\/$/, "").replace(/^http/, "ws");
+    q.set("websocket", `${base}?tab=${tab}`);
+    history.replaceState(history.state, "", `?${q}`);
+  }
+}
+"""
+
+
 @dataclass(frozen=True)
 class Asset:
     body: bytes
@@ -98,6 +120,7 @@ def unpack(html: str) -> ClientFiles | None:
     # The bundle reads __viserZstdWasm when it starts: publish it first, then run the bundle (which the
     # page has already been fetching and compiling since its modulepreload).
     boot = (
+        f"{TAB_SCRIPT}"
         "// Publish viser's zstd decoder as its single-file loader does, then start the client.\n"
         f'const url = new URL("{names["wasm"]}", import.meta.url);\n'
         "globalThis.__viserZstdWasm = await WebAssembly.compileStreaming(fetch(url));\n"
@@ -105,6 +128,7 @@ def unpack(html: str) -> ClientFiles | None:
     ).encode()
     names["boot"] = _name("boot", boot, "js")
     head = (
+        '<link rel="icon" href="/favicon.svg" type="image/svg+xml">\n'
         f'<link rel="modulepreload" href="assets/{names["js"]}">\n'
         f'<link rel="preload" href="assets/{names["wasm"]}" as="fetch" crossorigin>\n'
         f'<link rel="stylesheet" href="assets/{names["css"]}">\n'

@@ -86,7 +86,9 @@ def main() -> None:
 
     bus = SnapshotBus()
     footprint = np.array([[0.12, 0.10], [-0.12, 0.10], [-0.12, -0.10], [0.12, -0.10]])
-    viewer = Viewer(bus, footprint=footprint, on_pose_input=lambda k, p: print(f"pose input: {k} {p}"))
+    viewer = Viewer(
+        bus, footprint=footprint, on_pose_input=lambda k, p, tab: print(f"pose input ({tab}): {k} {p}")
+    )
     viewer.start()
     grid = office_map()
     stop = threading.Event()

@@ -2,7 +2,8 @@
 
 viser binds its own socket (127.0.0.1, ephemeral port) and has no ASGI hook, so FastAPI serves the
 client page at ``GET /viz/`` and relays the websocket ``/viz`` byte-for-byte to viser, forwarding the
-``viser-v<version>`` subprotocol (any other version is refused by viser with close code 1002). One
+``viser-v<version>`` subprotocol (any other version is refused by viser with close code 1002) and the
+page's ``?tab=`` token (per-tab view state, ``tabs.py``). One
 origin and one port: sign-in can sit in front through ``authorize``, and no iframe reconnect trouble.
 The relay only copies bytes on uvicorn's loop; no decoding, no numpy. The client page itself is viser's,
 unpacked into separate files (``client.py``) so the browser fetches and compiles the bundle sooner.
@@ -25,6 +26,7 @@ from fastapi.responses import FileResponse, RedirectResponse, Response
 from starlette.websockets import WebSocketDisconnect
 
 from app.viewer.client import CLIENT_HTML, client_files
+from app.viewer.tabs import valid_tab
 
 if TYPE_CHECKING:
     from app.viewer.scene import Viewer
@@ -92,9 +94,10 @@ async def relay_to_viewer(ws: WebSocket, viewer: Viewer | None) -> None:
         await ws.close(code=CLOSE_TRY_AGAIN)
         return
     protos = list(ws.scope.get("subprotocols", []))
+    tab = valid_tab(ws.query_params.get("tab"))  # the browser tab's token: its own view state (tabs.py)
     try:
         upstream = await websockets.connect(
-            f"ws://127.0.0.1:{viewer.port}",
+            f"ws://127.0.0.1:{viewer.port}/" + (f"?tab={tab}" if tab else ""),
             subprotocols=protos or None,  # type: ignore[arg-type]
             max_size=None,
             compression=None,

@@ -12,22 +12,26 @@ one-slot mailbox so neither can slow the control loop:
 Every node has a stable name and is created once; optional layers are hidden, never removed, when the
 snapshot has no data for them (viser keeps tombstones for removed nodes, see viser.md §8).
 Pointer input follows Rviz2's tools: a click sets a position, Shift+drag on the map sets position and
-heading; both end in ``on_pose_input(kind, pose)``, which must only enqueue.
+heading; both end in ``on_pose_input(kind, pose, tab)``, which must only enqueue and returns why it
+refused, if it did. Layer checkboxes and the click mode belong to each browser tab (``tabs.py``); an
+initial pose is a one-shot tool, as in Rviz2: once one is set, that tab's clicks set goals again.
 """
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import html
 import logging
 import math
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import rich
 import viser
 
 from app.bus import Snapshot, SnapshotBus, Subscription
@@ -40,13 +44,22 @@ from app.viewer.pose_input import (
     pose_from_press_drag,
     ray_ground,
 )
+from app.viewer.tabs import (
+    DEFAULT_TAB,
+    ClientView,
+    TabRegistry,
+    send_visibility,
+    tab_of_connection,
+)
 from app.viewer.tiles import TiledGridLayer, TileOptions
 from nav.types import Costmap, Pose2D, wrap_angle
 
 log = logging.getLogger(__name__)
 
-PoseInputCallback = Callable[[str, Pose2D], None]
+PoseInputCallback = Callable[[str, Pose2D, str], "str | None"]
+"""(kind, pose, tab token) -> the reason it was refused, or None when it was taken."""
 POSE_KINDS = {"goal": "goal", "initial pose": "initial_pose"}
+KIND_LABELS = {kind: label for label, kind in POSE_KINDS.items()}
 
 HIDDEN_BY_DEFAULT = frozenset({"/costmap"})
 
@@ -68,6 +81,18 @@ LAYERS: dict[str, str] = {
 
 MAX_RECOVERY_LABELS = 24
 """Recovery markers beyond this many (in one navigation) keep their marker but get no label."""
+
+
+@contextlib.contextmanager
+def quiet_viser() -> Iterator[None]:
+    """Silence viser's console output (rich's shared console, whichever thread prints)."""
+    console = rich.get_console()
+    was = console.quiet
+    console.quiet = True
+    try:
+        yield
+    finally:
+        console.quiet = was
 
 
 def behavior_badge_html(name: str | None) -> str:
@@ -154,11 +179,9 @@ class Viewer:
         self._stop = threading.Event()
         self._threads: list[threading.Thread] = []
         self._subs: list[Subscription] = []
-        self._lock = threading.RLock()  # visibility state, shared by the scene, grid and viser threads
         self._h: dict[str, Any] = {}  # scene handles by node name
         self._has_data: dict[str, bool] = {}
-        self._shown: dict[str, bool] = {}
-        self._checks: dict[str, Any] = {}
+        self.tabs = TabRegistry({node: node not in HIDDEN_BY_DEFAULT for node in LAYERS.values()})
         self._last: dict[str, Any] = {}  # identity of the last data drawn per layer
         self._pose = Pose2D()
         self._aimed_at: Any = None  # map geometry the initial camera (and "Reset View") looks at
@@ -183,7 +206,10 @@ class Viewer:
         """Bind viser on 127.0.0.1 (ephemeral port), build the scene and GUI, start both threads."""
         if self._server is not None:
             return
-        self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
+        # viser prints a panel with its own port even when not verbose; users open the dashboard's
+        # address (the relay), so that port must not look like one to open
+        with quiet_viser():
+            self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
         self._last.clear()  # a restarted server has an empty scene: redraw everything
         self._aimed_at = None
         self._build_scene()
@@ -208,7 +234,8 @@ class Viewer:
         if self._server is not None:
             self.map_layer.close()
             self.costmap_layer.close()
-            self._server.stop()
+            with quiet_viser():  # viser's "Server stopped" line (printed on its own thread)
+                self._server.stop()
             self._server = None
 
     def __enter__(self) -> Viewer:
@@ -322,11 +349,10 @@ class Viewer:
         self._has_data = {name: False for name in LAYERS.values()}
         self._has_data["/robot/scan"] = True  # shown empty until a scan arrives
         # Like Rviz's default displays: the costmap overlay starts hidden (its checkbox starts off) so
-        # the map stays readable. No layer's state is assumed: the first refresh sets every handle's
-        # visibility (the nodes are created visible, so an assumed "hidden" would never be applied).
-        self._shown = {}
-        for name in LAYERS.values():
-            self._refresh(name)
+        # the map stays readable. Layer visibility is sent to each client for its tab (tabs.py); the
+        # shared nodes start hidden so a page shows nothing it has not been told to.
+        for node in LAYERS.values():
+            self._h[node].visible = False
         s.on_click()(self._on_scene_click)
 
     def _lines(self, name: str, color: tuple[int, int, int], px: float | None = None) -> Any:
@@ -350,37 +376,101 @@ class Viewer:
         gui.set_panel_label("navdeck")
         self.status = gui.add_markdown("**waiting for the robot…**")
         self.behavior_badge = gui.add_html(behavior_badge_html(None), visible=False)
-        with gui.add_folder("Pose input"):
-            self.click_mode = gui.add_dropdown("Click sets", tuple(POSE_KINDS), initial_value="goal")
+        # The folders are shared; what is in them is built for each client (its tab's state).
+        self._pose_folder = gui.add_folder("Pose input")
+        with self._pose_folder:
             gui.add_markdown("Click: position. **Shift+drag** on the map: position and heading.")
-        with gui.add_folder("Layers"):
+        self._layers_folder = gui.add_folder("Layers")
+        self.server.on_client_connect(self._on_client_connect)
+        self.server.on_client_disconnect(self._on_client_disconnect)
+
+    # ---------------------------------------------------------------- per-tab view state
+    def _on_client_connect(self, client: viser.ClientHandle) -> None:
+        """Build this client's click-mode dropdown and layer checkboxes from its tab's state, then
+        show it the layers that tab has on."""
+        token = tab_of_connection(self.server, client.client_id) or f"client-{client.client_id}"
+        tab = self.tabs.tab(token)
+        view = ClientView(client, token)
+        with self._pose_folder:
+            view.click_mode = client.gui.add_dropdown(
+                "Click sets", tuple(POSE_KINDS), initial_value=KIND_LABELS.get(tab.kind, "goal")
+            )
+        view.click_mode.on_update(lambda ev: self._on_click_mode(token, ev))
+        with self._layers_folder:
             for label, node in LAYERS.items():
-                cb = gui.add_checkbox(label, LAYERS[label] not in HIDDEN_BY_DEFAULT)
-                self._checks[node] = cb
-                cb.on_update(lambda _ev, node=node: self._refresh(node))
+                cb = client.gui.add_checkbox(label, tab.layers[node])
+                cb.on_update(lambda ev, node=node: self._on_layer_check(token, node, ev))
+                view.checks[node] = cb
+        with self.tabs.lock:
+            self.tabs.clients[client.client_id] = view
+        for node in LAYERS.values():
+            self._refresh_client(view, node)
+
+    def _on_client_disconnect(self, client: viser.ClientHandle) -> None:
+        with self.tabs.lock:
+            self.tabs.clients.pop(client.client_id, None)
+
+    def _on_click_mode(self, token: str, event: Any) -> None:
+        if event.client_id is None:  # our own assignment (set_click_kind) echoing back
+            return
+        self.set_click_kind(token, POSE_KINDS.get(str(event.target.value), "goal"))
+
+    def _on_layer_check(self, token: str, node: str, event: Any) -> None:
+        if event.client_id is None:
+            return
+        label = next(k for k, v in LAYERS.items() if v == node)
+        self.set_layer_enabled(label, bool(event.target.value), token)
+
+    def _refresh_client(self, view: ClientView, node: str) -> None:
+        """Show a layer to one client iff its tab has the checkbox on and the latest snapshot had data."""
+        with self.tabs.lock:
+            want = bool(self._has_data.get(node, False)) and self.tabs.tab(view.tab).layers[node]
+            if view.sent.get(node) != want:
+                view.sent[node] = want
+                send_visibility(view.handle, node, want)
 
     def _refresh(self, node: str) -> None:
-        """Show a layer iff its checkbox is on and the latest snapshot had data for it."""
-        with self._lock:
-            cb = self._checks.get(node)
-            want = bool(self._has_data.get(node, False)) and (cb is None or bool(cb.value))
-            if self._shown.get(node) != want:
-                self._shown[node] = want
-                self._h[node].visible = want
+        with self.tabs.lock:
+            for view in list(self.tabs.clients.values()):
+                self._refresh_client(view, node)
 
     def _set_data(self, node: str, present: bool) -> None:
         if self._has_data.get(node) != present:
-            with self._lock:
+            with self.tabs.lock:
                 self._has_data[node] = present
             self._refresh(node)
 
-    def is_shown(self, node: str) -> bool:
-        """Whether a toggleable layer is currently visible (data present and checkbox on)."""
-        return bool(self._shown.get(node, False))
+    def is_shown(self, node: str, tab: str = DEFAULT_TAB) -> bool:
+        """Whether a toggleable layer is visible in ``tab``'s view (data present and checkbox on)."""
+        with self.tabs.lock:
+            return bool(self._has_data.get(node, False)) and self.tabs.tab(tab).layers[node]
 
-    def set_layer_enabled(self, label: str, enabled: bool) -> None:
-        """Tick or untick a layer checkbox (same effect as the user doing it)."""
-        self._checks[LAYERS[label]].value = enabled
+    def set_layer_enabled(self, label: str, enabled: bool, tab: str = DEFAULT_TAB) -> None:
+        """Tick or untick a layer checkbox of one tab (same effect as its user doing it)."""
+        node = LAYERS[label]
+        with self.tabs.lock:
+            self.tabs.tab(tab).layers[node] = bool(enabled)
+            views = self.tabs.clients_of(tab)
+        for view in views:
+            cb = view.checks.get(node)
+            if cb is not None and bool(cb.value) != bool(enabled):
+                cb.value = bool(enabled)
+            self._refresh_client(view, node)
+
+    def click_kind(self, tab: str = DEFAULT_TAB) -> str:
+        """What a click in ``tab``'s view sets: "goal" or "initial_pose"."""
+        return self.tabs.tab(tab).kind
+
+    def set_click_kind(self, tab: str, kind: str) -> None:
+        """Choose what a click in ``tab``'s view sets (its dropdown follows)."""
+        if kind not in KIND_LABELS:
+            raise ValueError(f"kind must be one of: {', '.join(KIND_LABELS)}")
+        with self.tabs.lock:
+            self.tabs.tab(tab).kind = kind
+            views = self.tabs.clients_of(tab)
+        for view in views:
+            if view.click_mode is not None and view.click_mode.value != KIND_LABELS[kind]:
+                view.click_mode.value = KIND_LABELS[kind]
 
     # ---------------------------------------------------------------- snapshot -> scene
     def apply(self, snap: Snapshot) -> None:
@@ -468,7 +558,9 @@ class Viewer:
                 h["/people"].points = geo.disc_segments(np.asarray(people, dtype=float), 0.02)
             self._set_data("/people", present)
 
-        edges = snap.extras.get("graph_edges")
+        # Loop closures belong to the mapping session: once mapping ends (or navigation starts) they
+        # would only hide the path, so the layer is empty outside MAPPING.
+        edges = snap.extras.get("graph_edges") if snap.mode == "mapping" else None
         if edges is not last.get("edges"):
             last["edges"] = edges
             present = edges is not None and len(edges) > 0
@@ -683,17 +775,33 @@ class Viewer:
                 log.exception("viewer: grid update failed")
 
     # ---------------------------------------------------------------- pointer input
-    def _emit(self, kind: str, pose: Pose2D) -> None:
+    def _emit(self, tab: str, kind: str, pose: Pose2D) -> None:
+        """Hand a pose to ``on_pose_input`` and tell the tab's view what became of it: a refusal with its
+        reason, an initial pose with a confirmation (and the tab's clicks set goals again)."""
         cb = self.on_pose_input
         if cb is None or not pose.is_finite():
             return
         try:
-            cb(kind, pose)
+            refused = cb(kind, pose, tab)
         except Exception:  # viser would only print it; keep the view alive
             log.exception("viewer: on_pose_input failed")
+            return
+        label = KIND_LABELS.get(kind, kind)
+        if refused:
+            self._notify(tab, f"{label} refused", refused, (220, 60, 60))
+            return
+        if kind == "initial_pose":
+            self.set_click_kind(tab, "goal")
+            where = f"x {pose.x:.2f} y {pose.y:.2f} θ {math.degrees(pose.theta):.0f}°"
+            self._notify(tab, "initial pose set", f"{where}. A click now sets a goal.", (40, 160, 80))
 
-    def _kind(self) -> str:
-        return POSE_KINDS.get(str(self.click_mode.value), "goal")
+    def _notify(self, tab: str, title: str, body: str, color: tuple[int, int, int]) -> None:
+        """A toast in the views of one tab (viser's per-client notification)."""
+        for view in self.tabs.clients_of(tab):
+            try:
+                view.handle.add_notification(title, body, auto_close_seconds=6.0, color=color)
+            except Exception:  # a client that just went away
+                log.debug("viewer: notification to client %s failed", view.handle.client_id, exc_info=True)
 
     def _on_scene_click(self, event: viser.SceneClickEvent) -> None:
         """Plain click: a goal faces the direction of travel, an initial pose keeps the estimate's heading."""
@@ -701,9 +809,10 @@ class Viewer:
             xy = ray_ground(event.ray_origin, event.ray_direction)
         except PoseInputError:
             return
-        kind = self._kind()
+        tab = self.tabs.tab_of_client(getattr(event, "client_id", None))
+        kind = self.click_kind(tab)
         theta = heading_towards(self._pose, xy) if kind == "goal" else self._pose.theta
-        self._emit(kind, Pose2D(float(xy[0]), float(xy[1]), theta))
+        self._emit(tab, kind, Pose2D(float(xy[0]), float(xy[1]), theta))
 
     def _bind_tile_drag(self, tile: viser.ImageHandle) -> None:
         tile.on_drag("left", modifier="shift")(self._on_map_drag)
@@ -721,7 +830,8 @@ class Viewer:
         preview = self._h["/input/preview"]
         if event.phase == "end":
             preview.visible = False
-            self._emit(self._kind(), pose)
+            tab = self.tabs.tab_of_client(getattr(event, "client_id", None))
+            self._emit(tab, self.click_kind(tab), pose)
             return
         tip = (pose.x + 0.5 * math.cos(pose.theta), pose.y + 0.5 * math.sin(pose.theta))
         preview.points = np.array([[[pose.x, pose.y, 0.05], [tip[0], tip[1], 0.05]]], np.float32)

@@ -7,6 +7,7 @@ export const wsURL = (path) => `${location.protocol === "https:" ? "wss" : "ws"}
 export const state = {
   mode: null, allowed: [], omni: false, limits: null, robot: null, driving: false, last: null,
   me: null, // GET /api/auth/me: role, username, can_drive
+  tab: null, // this tab's 3D view token: the server keeps its click mode and layers (app/viewer/tabs.py)
 };
 
 /** Timings the browser tests and the latency report read (ms since navigation start / epoch ms). */
@@ -27,14 +28,55 @@ export function emitTelemetry(t) {
   }
 }
 
+const TOAST_MS = { error: 15000, ok: 6000, info: 6000 };
+let toastTimer = null;
+
+/** The latest message in the top bar, next to the mode badge (the Messages list can be below the fold). */
+function toast(text, kind, count) {
+  const el = $("#toast");
+  if (!el) return;
+  if (!el.dataset.wired) {
+    el.dataset.wired = "1";
+    el.querySelector(".toast-close").addEventListener("click", () => { el.hidden = true; });
+  }
+  el.className = `toast ${kind}`;
+  el.querySelector(".toast-text").textContent = text;
+  el.querySelector(".toast-count").textContent = count > 1 ? `x${count}` : "";
+  el.title = text;
+  el.hidden = false;
+  clearTimeout(toastTimer);
+  toastTimer = setTimeout(() => { el.hidden = true; }, TOAST_MS[kind] || TOAST_MS.info);
+}
+
+/** Show ``text`` in Messages and in the top bar's toast. The same message again (a held key refused
+ *  several times a second) does not add a line: the newest line counts it ("x12") and takes its time. */
 export function message(text, kind = "info") {
-  const li = document.createElement("li");
-  li.className = kind;
-  li.textContent = `${new Date().toLocaleTimeString()}  ${text}`;
   const list = $("#messages");
-  if (!list) return;
-  list.prepend(li);
-  while (list.children.length > 30) list.lastChild.remove();
+  const newest = list && list.firstElementChild;
+  let count = 1;
+  if (newest && newest.dataset.text === text && newest.classList.contains(kind)) {
+    count = Number(newest.dataset.count || 1) + 1;
+    newest.dataset.count = String(count);
+    newest.querySelector(".msg-time").textContent = new Date().toLocaleTimeString();
+    newest.querySelector(".msg-count").textContent = `x${count}`;
+  } else if (list) {
+    const li = document.createElement("li");
+    li.className = kind;
+    li.dataset.text = text;
+    li.dataset.count = "1";
+    const time = document.createElement("span");
+    time.className = "msg-time";
+    time.textContent = new Date().toLocaleTimeString();
+    const body = document.createElement("span");
+    body.className = "msg-text";
+    body.textContent = text;
+    const times = document.createElement("span");
+    times.className = "msg-count";
+    li.append(time, body, times);
+    list.prepend(li);
+    while (list.children.length > 30) list.lastChild.remove();
+  }
+  toast(text, kind, count);
 }
 
 /** fetch + JSON; refusals are shown as messages with the server's reason, then thrown. */
@@ -48,7 +90,7 @@ export async function api(method, path, body) {
   if (res.status === 401 && !path.startsWith("/api/auth/")) { toLogin(); throw new Error("sign in required"); }
   if (!res.ok) {
     const why = data && data.detail ? (typeof data.detail === "string" ? data.detail : JSON.stringify(data.detail)) : res.statusText;
-    const allowed = data && data.allowed ? ` (allowed: ${data.allowed.join(", ") || "none"})` : "";
+    const allowed = data && data.allowed && data.allowed.length ? ` (allowed: ${data.allowed.join(", ")})` : "";
     const nearest = data && data.nearest_free ? ` (nearest free: ${fmt(data.nearest_free.x)}, ${fmt(data.nearest_free.y)})` : "";
     const missing = res.status === 404 && why === "Not Found" ? " (this server does not have that feature yet)" : "";
     message(`${method} ${path} refused (${res.status}): ${why}${allowed}${nearest}${missing}`, "error");

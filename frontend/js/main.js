@@ -11,15 +11,46 @@ import * as teleop from "./teleop.js";
 // Feature modules: each exports init(); add new ones here.
 const FEATURES = [status, teleop, joystick, gamepad, modes, goals, control];
 
+/** Server-side refusals and notices for this tab (a refused click in its 3D view, the new map frame). */
+function showNotices(t) {
+  for (const n of t.notices || []) {
+    if (n.type === "refused") {
+      const what = (n.what || "action").replace("_", " ");
+      message(`${what} refused${n.via ? ` (${n.via})` : ""}: ${n.reason}`, "error");
+    } else if (n.text) message(n.text, "ok");
+    if (n.click_mode) document.dispatchEvent(new CustomEvent("navdeck:click-mode", { detail: n.click_mode }));
+  }
+}
+
+/** The token of this tab's 3D view (chosen by the view's page, see app/viewer/client.py), which the
+ *  server uses for this tab's click mode, layers and notices; null when the view has none. */
+async function viewTab() {
+  const frame = $("#viewer");
+  for (let i = 0; i < 600 && frame; i += 1) { // up to 30 s: the view's page loads while this page does
+    try {
+      const tab = frame.contentWindow && frame.contentWindow.__navdeckTab;
+      if (tab) return tab;
+    } catch { return null; } // another origin
+    await new Promise((r) => setTimeout(r, 50));
+  }
+  return null;
+}
+
+let telemetry = null;
+let down = false;
+
 function connectTelemetry() {
-  const ws = new WebSocket(wsURL("/ws/telemetry?hz=10"));
-  let down = false;
+  const tab = state.tab ? `&tab=${encodeURIComponent(state.tab)}` : "";
+  const ws = (telemetry = new WebSocket(wsURL(`/ws/telemetry?hz=10${tab}`)));
   ws.onmessage = (ev) => {
     if (perf.telemetryAt === null) perf.telemetryAt = performance.now();
-    emitTelemetry(JSON.parse(ev.data));
+    const t = JSON.parse(ev.data);
+    showNotices(t);
+    emitTelemetry(t);
   };
   ws.onopen = () => { down = false; };
   ws.onclose = (ev) => {
+    if (ws.retab) { connectTelemetry(); return; } // reopened for this tab's notices, not lost
     if (ev.code === 1008) { message(`telemetry closed: ${ev.reason || "sign in again"}`, "error"); return; }
     if (!down) message("telemetry disconnected; retrying", "error");
     down = true;
@@ -95,6 +126,11 @@ async function init() {
   for (const f of FEATURES) f.init();
   status.applyRole();
   connectTelemetry();
+  state.tab = await viewTab();
+  if (state.tab) {
+    document.dispatchEvent(new CustomEvent("navdeck:view-tab", { detail: state.tab }));
+    if (telemetry && telemetry.readyState <= WebSocket.OPEN) { telemetry.retab = true; telemetry.close(); }
+  }
 }
 
 init();

@@ -1,6 +1,6 @@
 // Mapping (start / stop / save with a name), localization (global, initial pose from the 3D view),
 // navigation cancel, and what a click in the 3D view sets. Refusals show the server's reason.
-import { $, api, message } from "./core.js";
+import { $, api, message, state } from "./core.js";
 
 async function call(method, path, body, ok) {
   try {
@@ -10,9 +10,15 @@ async function call(method, path, body, ok) {
   } catch { return null; /* the refusal is already in Messages */ }
 }
 
+function showClickMode(kind) {
+  for (const r of document.querySelectorAll('input[name="click-mode"]')) r.checked = r.value === kind;
+}
+
+/** What a click in THIS tab's 3D view sets (other tabs keep theirs). */
 async function setClickMode(kind) {
-  const res = await call("POST", "/api/viewer/click_mode", { kind });
-  for (const r of document.querySelectorAll('input[name="click-mode"]')) r.checked = r.value === (res ? res.kind : "goal");
+  if (!state.tab) { message("the 3D view has not loaded yet: try again in a moment", "error"); showClickMode("goal"); return null; }
+  const res = await call("POST", "/api/viewer/click_mode", { kind, tab: state.tab });
+  showClickMode(res ? res.kind : "goal");
   return res;
 }
 
@@ -30,13 +36,19 @@ export function init() {
   $("#loc-global").addEventListener("click", () => call("POST", "/api/localization/global", undefined,
     "global localization: the robot turns in place until it knows where it is"));
   $("#loc-initial").addEventListener("click", async () => {
-    if (await setClickMode("initial_pose")) message("click (or shift+drag for the heading) in the 3D view where the robot is", "ok");
+    if (await setClickMode("initial_pose")) {
+      message("click (or shift+drag for the heading) in the 3D view where the robot is: one click sets it", "ok");
+    }
   });
   $("#nav-cancel").addEventListener("click", () => call("POST", "/api/navigation/cancel", undefined, "navigation cancelled"));
   for (const r of document.querySelectorAll('input[name="click-mode"]')) {
     r.addEventListener("change", () => { if (r.checked) setClickMode(r.value); });
   }
-  fetch("/api/viewer/click_mode").then((r) => (r.ok ? r.json() : null)).then((res) => {
-    if (res) for (const r of document.querySelectorAll('input[name="click-mode"]')) r.checked = r.value === res.kind;
-  }).catch(() => {});
+  // an initial pose is one-shot: the server says when this tab's clicks set goals again
+  document.addEventListener("navdeck:click-mode", (ev) => showClickMode(ev.detail));
+  document.addEventListener("navdeck:view-tab", (ev) => {
+    if (!ev.detail) return;
+    fetch(`/api/viewer/click_mode?tab=${encodeURIComponent(ev.detail)}`).then((r) => (r.ok ? r.json() : null))
+      .then((res) => { if (res) showClickMode(res.kind); }).catch(() => {});
+  });
 }

@@ -33,7 +33,10 @@ function connect() {
       document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
     }
     if (m.type === "error") {
-      message(`teleop refused: ${m.error}${m.allowed ? ` (allowed modes: ${m.allowed.join(", ")})` : ""}`, "error");
+      const allowed = m.allowed && m.allowed.length ? ` (allowed modes: ${m.allowed.join(", ")})` : "";
+      const other = m.control && m.control.holder && !state.driving; // refused because someone else drives
+      const todo = other ? ` (${m.control.holder.name || "another client"} holds control: press Take control to drive)` : "";
+      message(`teleop refused: ${m.error}${allowed}${todo}`, "error");
       if (m.control) document.dispatchEvent(new CustomEvent("navdeck:control", { detail: m }));
     }
   };

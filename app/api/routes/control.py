@@ -7,11 +7,15 @@ The rules, as the API description states them, are ``app.security.LEASE_RULES``.
 
 from __future__ import annotations
 
-from fastapi import APIRouter, Request
-from fastapi.responses import JSONResponse
+from typing import Annotated
 
-from app.api.deps import StrictModel
+from fastapi import APIRouter, Depends, Query, Request
+from fastapi.responses import JSONResponse
+from pydantic import Field
+
+from app.api.deps import RuntimeDep, StrictModel
 from app.security import LEASE_RULES, principal_of
+from app.viewer.scene import Viewer
 
 router = APIRouter(tags=["control"])
 
@@ -77,31 +81,47 @@ def release(request: Request):
 
 class ClickModeRequest(StrictModel):
     kind: str
+    tab: str = Field(
+        min_length=1,
+        max_length=64,
+        pattern=r"^[A-Za-z0-9_-]+$",
+        description="the browser tab whose 3D view this is for (the dashboard sends its view's tab token)",
+    )
 
 
-# The 3D view's "Click sets" dropdown: its labels and the pose-input kinds they stand for.
-CLICK_KINDS = {"goal": "goal", "initial_pose": "initial pose"}
+CLICK_KINDS = ("goal", "initial_pose")
 
 
-@router.get("/api/viewer/click_mode", summary="What a click in the 3D view sets: goal or initial_pose")
-def get_click_mode(request: Request):
-    viewer = request.app.state.runtime.viewer
-    if viewer is None or not hasattr(viewer, "click_mode"):
+def get_viewer(runtime: RuntimeDep) -> Viewer | None:
+    """The running 3D view, or None (``--no-viewer``)."""
+    viewer = runtime.viewer
+    return viewer if isinstance(viewer, Viewer) else None
+
+
+ViewerDep = Annotated[Viewer | None, Depends(get_viewer)]
+
+
+@router.get(
+    "/api/viewer/click_mode",
+    summary="What a click in one browser tab's 3D view sets: goal or initial_pose",
+    responses={503: {"description": "no 3D view"}},
+)
+def get_click_mode(viewer: ViewerDep, tab: str = Query("", max_length=64, pattern=r"^[A-Za-z0-9_-]*$")):
+    if viewer is None:
         return JSONResponse({"detail": "the 3D view is not running"}, status_code=503)
-    label = str(viewer.click_mode.value)
-    return {"kind": next((k for k, v in CLICK_KINDS.items() if v == label), "goal")}
+    return {"kind": viewer.click_kind(tab), "tab": tab}
 
 
 @router.post(
     "/api/viewer/click_mode",
-    summary="Choose what a click in the 3D view sets (like Rviz2's pose tools); shared by all viewers",
-    responses={422: {"description": "unknown kind"}, 503: {"description": "no 3D view"}},
+    summary="Choose what a click in one browser tab's 3D view sets (like Rviz2's pose tools); other tabs "
+    "keep theirs. An initial pose is one-shot: once set, that tab's clicks set goals again",
+    responses={422: {"description": "unknown kind or tab"}, 503: {"description": "no 3D view"}},
 )
-def set_click_mode(body: ClickModeRequest, request: Request):
-    viewer = request.app.state.runtime.viewer
+def set_click_mode(body: ClickModeRequest, viewer: ViewerDep):
     if body.kind not in CLICK_KINDS:
         return JSONResponse({"detail": f"kind must be one of: {', '.join(CLICK_KINDS)}"}, status_code=422)
-    if viewer is None or not hasattr(viewer, "click_mode"):
+    if viewer is None:
         return JSONResponse({"detail": "the 3D view is not running"}, status_code=503)
-    viewer.click_mode.value = CLICK_KINDS[body.kind]
-    return {"kind": body.kind}
+    viewer.set_click_kind(body.tab, body.kind)
+    return {"kind": body.kind, "tab": body.tab}

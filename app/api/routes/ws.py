@@ -15,7 +15,8 @@ from starlette.websockets import WebSocketState
 
 from app.auth import Principal, Role
 from app.limits import CommandRefused
-from app.modes import Mode, TransitionRefused
+from app.modes import Mode, TransitionRefused, driving_hint
+from app.notices import NoticeTap
 from app.runtime import Runtime
 from app.security import principal_of
 from app.telemetry import snapshot_dict
@@ -189,7 +190,7 @@ async def teleop(ws: WebSocket) -> None:
                     ws,
                     {
                         "type": "error",
-                        "error": f"teleop is not allowed in mode {mode.value}",
+                        "error": f"teleop is not allowed in mode {mode.value}: {driving_hint(mode)}",
                         "mode": mode.value,
                         "allowed": session.modes.allowed(),
                     },
@@ -216,6 +217,7 @@ async def telemetry(ws: WebSocket) -> None:
     period = 1.0 / min(max(hz, 1.0), 20.0)
     include_scan = ws.query_params.get("scan", "1") != "0"
     sub = rt.session.bus.subscribe(asyncio.get_running_loop())
+    notices = NoticeTap(rt.session, ws.query_params.get("tab"))
     guard = ws.app.state.guard
     watch = asyncio.create_task(_expiry_watch(ws, _principal(ws), lambda: None))
 
@@ -244,12 +246,14 @@ async def telemetry(ws: WebSocket) -> None:
                 snap, rt.profile.name, include_scan=include_scan, allowed_modes=rt.session.modes.allowed()
             )
             payload["control"] = guard.as_dict()
+            payload["notices"] = notices.drain()
             # a client that cannot take a frame within 2 s is dropped, never waited on by the loop
             await asyncio.wait_for(ws.send_text(json.dumps(payload)), timeout=2.0)
     except (WebSocketDisconnect, TimeoutError, RuntimeError):
         pass
     finally:
         sub.close()
+        notices.close()
         reader.cancel()
         watch.cancel()
         if ws.client_state == WebSocketState.CONNECTED:
