@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,8 +13,10 @@ import serial
 
 from nav.types import Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
+from robot.clock import RealClock
 from robot.profiles import load_profile
 from robot.serial.driver import (
+    BaseLink,
     SerialDriver,
     SerialOptions,
     SerialUrlError,
@@ -34,6 +37,7 @@ from robot.serial.protocol import (
     VelocityCommand,
 )
 from robot.serial.protocol import encode as encode_msg
+from robot.serial.pty import PtyPort
 
 PROFILE = load_profile("skid4")
 
@@ -358,3 +362,99 @@ def test_wrong_device_on_the_base_port_is_diagnosed(pair: EmulatorPair) -> None:
         assert seen[-1].state is LinkState.LOST
     finally:
         d.close()
+
+
+# ---------------------------------------------------------------------------------------- wheel counts
+@pytest.mark.parametrize("kinematics", ["diff", "skid", "omni"])
+def test_each_kinematics_reads_its_wheels_from_the_four_wire_channels(tmp_path, kinematics: str) -> None:
+    """Issue 23 item 1: Telemetry always carries four counters; a 2-wheel diff base fills L, R and the
+    host must take two of them (it used to crash the reader thread on a (2,) vs (4,) broadcast)."""
+    profile = replace(PROFILE, kinematics=kinematics)
+    with EmulatorPair(profile, world="box", link_dir=tmp_path, seed=2, lidar=False) as pair:
+        d = SerialDriver(SerialOptions(pair.base_path, link_timeout=1.0), profile)
+        try:
+            counts: list[np.ndarray] = []
+
+            def turned_a_wheel() -> bool:
+                d.command(Twist2D(0.0, 0.0, 0.6))
+                frame = d.read()
+                assert frame.fault is None, frame.fault
+                if frame.ticks is not None:
+                    counts.append(frame.ticks.counts)
+                return bool(counts) and np.abs(counts[-1]).max() > 100
+
+            assert wait_for(turned_a_wheel, timeout=10.0, period=0.05)
+            assert counts[-1].shape == (profile.wheel_count,)
+            # a CCW turn on the spot: left/right (or all four omni) wheels as the kinematics say
+            if kinematics == "omni":
+                assert np.all(counts[-1] > 0), counts[-1]
+            else:
+                left, right = counts[-1][: profile.wheel_count // 2], counts[-1][profile.wheel_count // 2 :]
+                assert np.all(left < 0) and np.all(right > 0), counts[-1]
+        finally:
+            d.close()
+
+
+# ---------------------------------------------------------------------------------------- dead threads
+def _raise(exc: Exception):
+    def fail(*args: object) -> None:
+        raise exc
+
+    return fail
+
+
+def test_a_crashed_base_reader_is_a_fault_with_its_cause(pair: EmulatorPair, driver: SerialDriver) -> None:
+    """A bug in the reader thread is reported as what it is, never as silence or a wrong baud rate."""
+    assert wait_for(lambda: driver.read().link.state is LinkState.OK, timeout=5.0)
+    driver._base._handle = _raise(ValueError("operands could not be broadcast"))  # type: ignore[method-assign]
+    seen: list[SensorFrame] = []
+
+    def faulted() -> bool:
+        seen.append(driver.read())
+        return seen[-1].fault is not None
+
+    assert wait_for(faulted, timeout=5.0)
+    frame = seen[-1]
+    assert frame.link.state is LinkState.LOST
+    assert "base reader thread" in frame.fault
+    assert "ValueError: operands could not be broadcast" in frame.fault
+    assert "something else" not in frame.fault and "no telemetry" not in frame.fault
+    # it stays that way (nothing can clear it) and nothing is commanded any more
+    time.sleep(0.2)
+    assert "ValueError" in (driver.read().fault or "")
+    refused = driver.refused_commands
+    driver.command(Twist2D(0.2, 0.0, 0.0))
+    assert driver.refused_commands == refused + 1
+    assert pair.base.last_command is not None and pair.base.last_command.vx == 0.0  # the stop went out
+
+
+def test_a_crashed_lidar_reader_is_a_fault_with_its_cause(pair: EmulatorPair, driver: SerialDriver) -> None:
+    assert wait_for(lambda: driver.read().scan is not None, timeout=5.0)
+    assert driver._lidar is not None
+    driver._lidar._on_nodes = _raise(IndexError("bin out of range"))  # type: ignore[method-assign]
+    assert wait_for(lambda: "IndexError: bin out of range" in (driver.read().fault or ""), timeout=5.0)
+    assert "lidar reader thread" in (driver.read().fault or "")
+
+
+def test_gyro_mean_weights_each_frame_by_its_period(tmp_path) -> None:
+    """A base starved for 200 ms sends one frame whose gyro_z is the mean over those 200 ms, then
+    catches up with frames 0.1 ms apart: the rate the odometry integrates is the time-weighted mean
+    (0.2 rad over 0.2 s), not the plain mean of four frames (which lost 3/4 of the turn)."""
+    port = PtyPort(tmp_path / "silent-base")
+    link = BaseLink(SerialOptions(port.path, link_timeout=10.0), RealClock())
+    try:
+
+        def frame(us: int, gyro: float) -> Telemetry:
+            return Telemetry(us, 0, 0, 0, 0, gyro, 0.0, 0.0, 9.81, 0, 12000, 0)
+
+        link._handle([frame(1_000_000, 0.0)])
+        link.take()
+        link._handle([frame(1_200_000, 1.0), frame(1_200_100, 0.0), frame(1_200_200, 0.0)])
+        _, _, _, gyro, new, _ = link.take()
+        assert new and gyro == pytest.approx(0.2 / 0.2002, rel=1e-6)
+        # the first frame after a reboot has no known period: its rate stands alone
+        link._handle([frame(5_000, 0.3)])
+        assert link.take()[3] == pytest.approx(0.3)
+    finally:
+        link.close()
+        port.close()
