@@ -5,7 +5,7 @@ requests are ignored like the A1 does). Each simulated scan (at the profile's ``
 Hz) becomes one rotation of ``sample_rate / rate_hz`` clockwise nodes with the start flag on the
 first, streamed at ``sample_rate`` in real time: by default the A1's 2000 samples/s, or more when
 the profile asks more beams per rotation than that gives (a 360-beam lidar at 10 Hz is an A2/A3-class
-sensor: 3960 samples/s), so any profile's lidar is emulated without empty beams. The
+sensor: 3600 samples/s), so any profile's lidar is emulated without empty beams. The
 motor cannot be switched through DTR on a pseudo-terminal, so it always spins while scanning.
 """
 
@@ -35,9 +35,9 @@ A1_SAMPLE_RATE = 2000.0  # samples/s in standard scan mode
 
 
 def default_sample_rate(spec: LidarSpec) -> float:
-    """Samples/s that give every beam of ``spec`` a sample each rotation (10 % to spare for the
-    angular jitter), and never fewer than the A1's 2000."""
-    return max(A1_SAMPLE_RATE, math.ceil(1.1 * spec.beams * spec.rate_hz))
+    """Samples/s that give every beam of ``spec`` a sample each rotation (the emulated angles jitter by
+    under a quarter step, so one sample a beam lands in each), and never fewer than the A1's 2000."""
+    return max(A1_SAMPLE_RATE, float(spec.beams * spec.rate_hz))
 
 
 def scan_to_nodes(
