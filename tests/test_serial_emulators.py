@@ -14,6 +14,8 @@ import pytest
 import serial
 
 from nav.types import Pose2D
+from robot.base import ImuReading, WheelTicks
+from robot.odometry import WheelOdometry
 from robot.profiles import load_profile
 from robot.serial.driver import wait_for
 from robot.serial.emulate import EmulatorPair
@@ -163,3 +165,54 @@ def test_wrong_wheel_radius_parameter_changes_real_speed(tmp_path) -> None:
             speeds.append(speed)
     assert speeds[0] == pytest.approx(0.2, rel=1e-6)
     assert speeds[1] / speeds[0] == pytest.approx(1 / 1.1, rel=1e-6)
+
+
+def test_gyro_rate_times_period_adds_up_to_the_turn_when_the_simulator_starves(tmp_path) -> None:
+    """The telemetry's gyro is the mean rate over each frame's own MCU period, so the host's sum of
+    rate x period is the angle turned, even when the simulator thread stalls mid-turn (as on a loaded
+    machine: no new data for a while, then all of it in one catch-up frame)."""
+    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path, lidar=False) as p:
+        p.pump.sim.options = type(p.pump.sim.options)(slip_noise_std=0.0, gyro_noise=False, lidar_noise=False)
+        with serial.Serial(p.base_path, 115200, timeout=0.02) as ser:
+            seq, decoder, telem = Sequencer(), MessageDecoder(), []
+
+            def run(cmd: VelocityCommand, done) -> None:
+                end = time.monotonic() + 30.0
+                while not done():
+                    assert time.monotonic() < end
+                    ser.write(seq.encode(cmd))
+                    telem.extend(
+                        m for m in decoder.feed(ser.read(max(1, ser.in_waiting))) if isinstance(m, Telemetry)
+                    )
+                    time.sleep(0.02)
+
+            def quiet(n: int = 5):
+                start = len(telem)
+                return lambda: len(telem) - start >= n and p.pump.sim.truth_velocity.is_zero()
+
+            run(VelocityCommand(0.0, 0.0, 0.0), quiet())
+            th0, first = p.pump.truth_pose.theta, len(telem) - 1
+            run(VelocityCommand(0.0, 0.0, 0.8), lambda: p.pump.sim.truth_velocity.wz > 0.7)
+            p.pump.step = lambda: None  # type: ignore[method-assign]  # the simulator thread stalls
+            frozen = len(telem)
+            run(VelocityCommand(0.0, 0.0, 0.8), lambda: len(telem) - frozen >= 8)
+            del p.pump.step
+            run(
+                VelocityCommand(0.0, 0.0, 0.8),
+                lambda: p.pump.truth_pose.relative_to(Pose2D(0, 0, th0)).theta > 1.0,
+            )
+            run(VelocityCommand(0.0, 0.0, 0.0), quiet())
+            turned = float(p.pump.truth_pose.relative_to(Pose2D(0.0, 0.0, th0)).theta)
+    frames = telem[first:]
+    us = np.array([t.mcu_us for t in frames], dtype=np.int64)
+    rates = np.array([t.gyro_z for t in frames])
+    integrated = float(np.sum(rates[1:] * np.diff(us) * 1e-6))
+    assert integrated == pytest.approx(turned, abs=0.02), (integrated, turned)
+    # and the host's gyro-fused odometry, which takes still wheels for a zero-velocity update (gyro
+    # bias), follows: frames of the stall must not claim a turn their counts do not show
+    odometry = WheelOdometry(PROFILE)
+    for t in frames:
+        stamp = t.mcu_us * 1e-6
+        odometry.update(WheelTicks(stamp, np.array(t.enc)), ImuReading(stamp, t.gyro_z, (0.0, 0.0, 9.81)))
+    assert odometry.pose.theta == pytest.approx(turned, abs=0.03), (odometry.pose.theta, turned)
+    assert abs(odometry.gyro_bias) < 0.01, odometry.gyro_bias
