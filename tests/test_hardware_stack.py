@@ -87,6 +87,17 @@ def drive_until(ws, done, timeout: float = 15.0, vx: float = 0.0, vy: float = 0.
     return reached
 
 
+def moved_beyond(pair: EmulatorPair, far: float, turn: bool = False):
+    """A ``drive_until`` condition: the robot turned ``far`` rad (``turn``) or went ``far`` m from here."""
+    before = pair.pump.truth_pose
+
+    def done() -> bool:
+        moved = pair.pump.truth_pose.relative_to(before)
+        return (abs(moved.theta) if turn else math.hypot(moved.x, moved.y)) > far
+
+    return done
+
+
 def settled(pair: EmulatorPair, timeout: float = 10.0) -> Pose2D:
     """Wait until the emulated robot stands still (0.3 s without moving 1 mm); its true pose then."""
 
@@ -141,20 +152,20 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
     truth0 = pair.pump.truth_pose
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         assert hello(ws)["driving"] is True
-        drive(ws, 1.2, vx=0.2)
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(truth0) > 0.15, vx=0.2)
         assert session.modes.mode.value == "teleop", session.fault
         assert session.fault is None, session.fault
         # odometry from the serial encoder counts follows the emulated robot's true motion
-        moved_truth = pair.pump.truth_pose.distance_to(truth0)
-        moved_odom = session.odom_pose.distance_to(Pose2D())
-        assert 0.1 < moved_truth < 0.3, moved_truth
-        assert moved_odom == pytest.approx(moved_truth, abs=0.03)
+        moved_truth = settled(pair).distance_to(truth0)
+        assert wait_for(
+            lambda: session.odom_pose.distance_to(Pose2D()) == pytest.approx(moved_truth, abs=0.03),
+            timeout=5.0,
+        ), (session.odom_pose, moved_truth)
         assert session.health()["link"] == "ok"
         assert session.last_scan is not None and session.health()["scan_age_s"] < 1.0
         # the robot turns too, and the gyro-fused heading follows the truth
         th0 = session.odom_pose.theta
-        drive(ws, 0.8, wz=0.8)
-        assert session.odom_pose.theta - th0 > 0.3
+        assert drive_until(ws, lambda: session.odom_pose.theta - th0 > 0.3, wz=0.8)
 
         r = httpx.post(f"{server.url}/api/robot/estop", timeout=10)
         assert r.status_code == 200 and r.json()["mode"] == "estop"
@@ -164,17 +175,17 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
         ws.send(twist(vx=0.2))
         err = json.loads(ws.recv(timeout=10))
         assert err["type"] == "error" and err["mode"] == "estop"
-        time.sleep(0.3)
-        settled = pair.pump.truth_pose
+        resting = settled(pair)
+        ws.send(twist(vx=0.2))
         time.sleep(0.4)
-        assert pair.pump.truth_pose.distance_to(settled) < 0.005
+        assert pair.pump.truth_pose.distance_to(resting) < 0.005
 
         r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
         assert r.status_code == 200 and r.json()["mode"] == "idle"
         assert wait_for(lambda: not pair.base.estopped, timeout=2.0)
         assert commands_seen(pair, Reset)
-        drive(ws, 0.6, vx=0.15)
-        assert pair.pump.truth_pose.distance_to(settled) > 0.03  # drives again after the reset
+        # drives again after the reset
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(resting) > 0.03, vx=0.15)
 
 
 def test_unplug_faults_and_stops_then_replug_recovers(
@@ -184,7 +195,8 @@ def test_unplug_faults_and_stops_then_replug_recovers(
     session = server.runtime.session
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         hello(ws)
-        drive(ws, 0.6, vx=0.15)
+        start = pair.pump.truth_pose
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(start) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
         pair.base.unplug()
         t0 = time.monotonic()
@@ -214,9 +226,8 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         assert r.json()["mode"] == "idle" and r.json()["fault"] is None
         # and the robot can be driven again
         before = pair.pump.truth_pose
-        drive(ws, 0.6, vx=0.15)
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(before) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
-        assert pair.pump.truth_pose.distance_to(before) > 0.03
 
 
 def test_silent_base_faults_after_the_link_timeout(pair: EmulatorPair, server: EmbeddedServer) -> None:
@@ -323,9 +334,9 @@ def test_maps_over_the_hardware_path(pair: EmulatorPair, server: EmbeddedServer)
             hello(ws)
             ws.send(json.dumps({"type": "take_control"}))
             assert json.loads(ws.recv(timeout=10))["driving"]
-            drive(ws, 3.0, vx=0.2)
-            drive(ws, 1.5, wz=0.8)
-            drive(ws, 2.0, vx=0.2)
+            # as far as 3 s, 1.5 s and 2 s of driving take an unloaded machine
+            for move, far in ((dict(vx=0.2), 0.5), (dict(wz=0.8), 1.0), (dict(vx=0.2), 0.35)):
+                assert drive_until(ws, moved_beyond(pair, far, "wz" in move), **move), rt.session.fault
         assert pair.pump.truth_pose.distance_to(Pose2D()) > 0 and rt.session.fault is None, rt.session.fault
         state = api.get("/api/mapping").json()
         r = api.post("/api/mapping/stop")
@@ -369,12 +380,8 @@ def test_each_kinematics_is_served_over_the_emulators_and_driven_by_teleop(tmp_p
                 moves = [dict(vx=0.15), dict(wz=0.6)] + ([dict(vy=0.15)] if profile.is_omni else [])
                 for move in moves:
                     before = pair.pump.truth_pose
-
-                    def far_enough(before: Pose2D = before, turn: bool = "wz" in move) -> bool:
-                        moved = pair.pump.truth_pose.relative_to(before)
-                        return abs(moved.theta) > 0.4 if turn else math.hypot(moved.x, moved.y) > 0.12
-
-                    reached = drive_until(ws, far_enough, **move)
+                    turn = "wz" in move
+                    reached = drive_until(ws, moved_beyond(pair, 0.4 if turn else 0.12, turn), **move)
                     assert reached and session.fault is None, (move, session.fault)
                     assert session.modes.mode.value == "teleop"
                     moved = settled(pair).relative_to(before)
