@@ -34,6 +34,11 @@ from robot.odometry import WheelOdometry
 
 log = logging.getLogger("navdeck.session")
 
+TELEOP_REARM_REASON = (
+    "release the controls first: after an e-stop or a fault reset the robot moves only on a fresh "
+    "command (key released and pressed again, joystick back through zero)"
+)
+
 
 class Stage(Protocol):
     """A pipeline stage run by the control loop (SLAM, localization, costmaps, navigation...).
@@ -155,6 +160,9 @@ class Session:
         self.stats = LoopStats()
         self.fault_monitor = FaultMonitor(self.period, options.faults)
         self._teleop = TeleopState()
+        # False from an e-stop, fault or reset until a zero teleop command: a key held (or a stick
+        # deflected) through the reset must not drive the robot the moment it is re-armed
+        self.teleop_armed = True
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
         self._seq = 0
@@ -182,15 +190,23 @@ class Session:
         self.started_at = self.clock.now()
 
     # ------------------------------------------------------------------ commands from other threads
-    def set_teleop(self, cmd: Twist2D, client: str) -> None:
+    def set_teleop(self, cmd: Twist2D, client: str) -> bool:
         """Store an operator's velocity command (teleop websocket). Applied while the mode allows it,
         and sent at once (reflex path) so it reaches the driver without waiting for the next tick.
 
         A command beyond the sanity bound (``app.limits.sanity_check``: 2x the profile's limits) is
         refused: the robot is stopped (teleop zeroed) and ``CommandRefused`` raised for the caller
-        to report. Commands a little over the limits are clamped later, and reported, as usual."""
+        to report. Commands a little over the limits are clamped later, and reported, as usual.
+        False (ignored, ``TELEOP_REARM_REASON``): a motion command before the zero command that
+        re-arms teleop after an e-stop, fault or reset."""
         self.check_teleop(cmd, client)
+        with self._lock:
+            if not self.teleop_armed:
+                if not cmd.is_zero():
+                    return False
+                self.teleop_armed = True
         self._store_teleop(cmd, client)
+        return True
 
     def check_teleop(self, cmd: Twist2D, client: str) -> None:
         """Raise ``CommandRefused`` for a command beyond the sanity bound, after stopping the robot
@@ -234,6 +250,7 @@ class Session:
         with self._lock:
             self.estop_latched = True
             self._teleop = TeleopState()
+            self.teleop_armed = False
         self.modes.enter(Mode.ESTOP, f"e-stop by {source}")
 
     def reset(self) -> Mode:
@@ -243,6 +260,8 @@ class Session:
         with self._lock:
             self.estop_latched = False
             self.fault = None
+            self._teleop = TeleopState()
+            self.teleop_armed = False  # only a zero command re-arms: see set_teleop
         self.fault_monitor.on_reset()
         self._reset_driver = True
         return mode
@@ -541,6 +560,7 @@ class Session:
         with self._lock:
             self.fault = reason
             self._teleop = TeleopState()
+            self.teleop_armed = False
         self.modes.enter(Mode.FAULT, reason)
 
     def _fault_condition(self, now: float) -> str | None:

@@ -76,6 +76,7 @@ def reset_refused(s: Session, match: str) -> None:
 def drives_again(s: Session) -> None:
     assert s.reset() == Mode.IDLE
     s.request_mode("teleop")
+    tick(s, Twist2D())  # the operator lets go first: a reset re-arms teleop only on a zero command
     start = s.pose
     for _ in range(20):
         tick(s, STRAIGHT)

@@ -29,7 +29,7 @@ from nav.types import Pose2D
 from robot.profiles import load_profile
 from robot.serial.driver import wait_for
 from robot.serial.emulate import EmulatorPair
-from robot.serial.protocol import EStop, Reset
+from robot.serial.protocol import EStop, ParamId, Reset, VelocityCommand
 from robot.serial.pty import PtyPort
 
 PROFILE = load_profile("skid4")
@@ -134,11 +134,18 @@ def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
     yield from _serve(tmp_path, pair.url())
 
 
+def patient(pair: EmulatorPair) -> str:
+    """For tests about something else than the watchdogs: a 1 s firmware command watchdog and a 1 s
+    host link watchdog, so threads starved for 300 ms on a loaded CI machine fault nothing (a pulled
+    port still faults at once). The robot URL to serve."""
+    pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
+    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0"
+
+
 @pytest.fixture
 def patient_server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
-    """A 1 s link watchdog: the emulator's threads, starved for 300 ms on a loaded CI machine,
-    must not fault the link before a test pulls the plug (a pulled port faults at once)."""
-    yield from _serve(tmp_path, pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0")
+    """A server on ``patient`` watchdogs."""
+    yield from _serve(tmp_path, patient(pair))
 
 
 def commands_seen(pair: EmulatorPair, kind: type) -> list:
@@ -146,8 +153,9 @@ def commands_seen(pair: EmulatorPair, kind: type) -> list:
 
 
 def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
-    pair: EmulatorPair, server: EmbeddedServer
+    pair: EmulatorPair, patient_server: EmbeddedServer
 ) -> None:
+    server = patient_server
     session = server.runtime.session
     truth0 = pair.pump.truth_pose
     with connect(f"{server.ws_url}/ws/teleop") as ws:
@@ -184,7 +192,8 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
         assert r.status_code == 200 and r.json()["mode"] == "idle"
         assert wait_for(lambda: not pair.base.estopped, timeout=2.0)
         assert commands_seen(pair, Reset)
-        # drives again after the reset
+        # drives again after the reset, on a fresh command (the key released first)
+        ws.send(twist())
         assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(resting) > 0.03, vx=0.15)
 
 
@@ -224,7 +233,8 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
         assert r.status_code == 200, r.text
         assert r.json()["mode"] == "idle" and r.json()["fault"] is None
-        # and the robot can be driven again
+        # and the robot can be driven again, on a fresh command
+        ws.send(twist())
         before = pair.pump.truth_pose
         assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(before) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
@@ -323,9 +333,10 @@ def test_busy_port_exits_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureF
     assert "\n" not in err and "busy" in err and port.path in err, err
 
 
-def test_maps_over_the_hardware_path(pair: EmulatorPair, server: EmbeddedServer) -> None:
+def test_maps_over_the_hardware_path(pair: EmulatorPair, patient_server: EmbeddedServer) -> None:
     """Mapping is driver-agnostic: scans from the emulated RPLidar and odometry from the serial encoder
     counts build and save a map, like with ``--robot sim``."""
+    server = patient_server
     rt = server.runtime
     with httpx.Client(base_url=server.url, timeout=20) as api:
         r = api.post("/api/mapping/start")
@@ -369,7 +380,7 @@ def test_each_kinematics_is_served_over_the_emulators_and_driven_by_teleop(tmp_p
     profile_arg = str(docs_diff_profile(tmp_path)) if kind == "docs-diff" else kind
     profile = load_profile(profile_arg)
     with EmulatorPair(profile, world="box", link_dir=tmp_path / "dev", seed=5) as pair:
-        url = pair.url() + "&link_timeout=1.0"  # a starved emulator thread is not what is tested here
+        url = patient(pair)  # a starved emulator thread is not what is tested here
         with serve_in_thread(make_settings(tmp_path, robot=url, profile=profile_arg)) as server:
             session = server.runtime.session
             assert session.profile.kinematics == profile.kinematics
@@ -402,3 +413,38 @@ def test_each_kinematics_is_served_over_the_emulators_and_driven_by_teleop(tmp_p
                     timeout=5.0,
                 ), (session.odom_pose, truth)
                 assert session.fault is None and session.health()["link"] == "ok"
+
+
+def test_a_key_held_through_a_reset_does_not_move_the_robot(
+    pair: EmulatorPair, patient_server: EmbeddedServer
+) -> None:
+    """Issue 23 item 4: another client resets the e-stop while the dashboard still holds a key. The
+    held key's commands are refused (once, with the reason) and the base gets only zero velocities
+    until the key is released and pressed again."""
+    server = patient_server
+    session = server.runtime.session
+    with connect(f"{server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)
+        assert httpx.post(f"{server.url}/api/robot/estop", timeout=10).status_code == 200
+        ws.send(twist(wz=0.6))  # held
+        assert json.loads(ws.recv(timeout=10))["mode"] == "estop"
+        assert httpx.post(f"{server.url}/api/robot/reset", timeout=10).json()["mode"] == "idle"
+        resting = settled(pair)
+        sent_before = len(pair.base.message_log)
+        for _ in range(10):  # the key is still down: the dashboard resends it at 10 Hz
+            ws.send(twist(wz=0.6))
+            time.sleep(0.1)
+        replies = []
+        while not any("release the controls" in r.get("error", "") for r in replies):
+            replies.append(json.loads(ws.recv(timeout=10)))
+        assert sum("release the controls" in r.get("error", "") for r in replies) == 1  # said once
+        assert session.modes.mode.value == "idle"
+        assert pair.pump.truth_pose.distance_to(resting) < 0.005
+        assert abs(pair.pump.truth_pose.relative_to(resting).theta) < 0.005
+        velocities = [
+            m for _, m in list(pair.base.message_log)[sent_before:] if isinstance(m, VelocityCommand)
+        ]
+        assert all(m.vx == 0.0 and m.wz == 0.0 for m in velocities)
+        ws.send(twist())  # released ...
+        assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)  # ... pressed again: it turns

@@ -18,6 +18,7 @@ from app.limits import CommandRefused
 from app.modes import Mode, TransitionRefused
 from app.runtime import Runtime
 from app.security import principal_of
+from app.session import TELEOP_REARM_REASON
 from app.telemetry import snapshot_dict
 from nav.types import Twist2D
 
@@ -118,6 +119,7 @@ async def teleop(ws: WebSocket) -> None:
             guard.free(client_id, "session expired")
 
     watch = asyncio.create_task(_expiry_watch(ws, p, expired))
+    told_to_rearm = False  # the re-arm refusal is said once per held command, not 10 times a second
     try:
         while True:
             message = await ws.receive()
@@ -180,6 +182,15 @@ async def teleop(ws: WebSocket) -> None:
                 await _send(ws, {"type": "error", **exc.as_dict()})
                 continue
             mode = session.modes.mode
+            if not session.teleop_armed and mode in (Mode.IDLE, Mode.TELEOP, Mode.MAPPING):
+                if cmd.is_zero():  # the key released, the stick centred: re-armed, whatever the mode
+                    session.set_teleop(cmd, client_id)
+                    told_to_rearm = False
+                    continue
+                if not told_to_rearm:
+                    await _send(ws, {"type": "error", "error": TELEOP_REARM_REASON, "mode": mode.value})
+                told_to_rearm = True
+                continue
             if mode == Mode.IDLE and not cmd.is_zero():
                 with contextlib.suppress(TransitionRefused):
                     session.request_mode(Mode.TELEOP)
@@ -195,7 +206,11 @@ async def teleop(ws: WebSocket) -> None:
                     },
                 )
                 continue
-            session.set_teleop(cmd, client_id)
+            if session.set_teleop(cmd, client_id):
+                told_to_rearm = False
+            elif not told_to_rearm:  # disarmed between the check above and here (an e-stop)
+                await _send(ws, {"type": "error", "error": TELEOP_REARM_REASON, "mode": mode.value})
+                told_to_rearm = True
     except WebSocketDisconnect:
         pass
     finally:
