@@ -160,9 +160,11 @@ class Session:
         self.stats = LoopStats()
         self.fault_monitor = FaultMonitor(self.period, options.faults)
         self._teleop = TeleopState()
-        # False from an e-stop, fault or reset until a zero teleop command: a key held (or a stick
-        # deflected) through the reset must not drive the robot the moment it is re-armed
-        self.teleop_armed = True
+        # Clients whose latest teleop input is a motion (a key held, a stick deflected), and those of
+        # them disarmed by an e-stop, fault or reset: they drive again only after a zero input, so a
+        # key held through a reset does not move the robot the moment it is re-armed.
+        self._teleop_holding: set[str] = set()
+        self._teleop_disarmed: set[str] = set()
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
         self._seq = 0
@@ -200,11 +202,8 @@ class Session:
         False (ignored, ``TELEOP_REARM_REASON``): a motion command before the zero command that
         re-arms teleop after an e-stop, fault or reset."""
         self.check_teleop(cmd, client)
-        with self._lock:
-            if not self.teleop_armed:
-                if not cmd.is_zero():
-                    return False
-                self.teleop_armed = True
+        if not self.teleop_input(cmd, client):
+            return False
         self._store_teleop(cmd, client)
         return True
 
@@ -236,6 +235,21 @@ class Session:
             self._reflex(schedule_ramp_end=True)
         self._wake.set()
 
+    def teleop_input(self, cmd: Twist2D, client: str) -> bool:
+        """Note an operator's latest input, whether or not the mode lets it drive; False while the
+        client is disarmed (``TELEOP_REARM_REASON``): a motion held since an e-stop, fault or reset."""
+        with self._lock:
+            if cmd.is_zero():
+                self._teleop_holding.discard(client)
+                self._teleop_disarmed.discard(client)
+                return True
+            self._teleop_holding.add(client)
+            return client not in self._teleop_disarmed
+
+    def _disarm_teleop(self) -> None:
+        """Every client holding a motion must let go before it drives again (call under ``_lock``)."""
+        self._teleop_disarmed |= self._teleop_holding
+
     def stop_teleop(self, client: str | None = None) -> None:
         with self._lock:
             if client is None or self._teleop.client in (client, None):
@@ -250,7 +264,7 @@ class Session:
         with self._lock:
             self.estop_latched = True
             self._teleop = TeleopState()
-            self.teleop_armed = False
+            self._disarm_teleop()
         self.modes.enter(Mode.ESTOP, f"e-stop by {source}")
 
     def reset(self) -> Mode:
@@ -261,7 +275,7 @@ class Session:
             self.estop_latched = False
             self.fault = None
             self._teleop = TeleopState()
-            self.teleop_armed = False  # only a zero command re-arms: see set_teleop
+            self._disarm_teleop()  # also a motion held during the e-stop: only a zero input re-arms
         self.fault_monitor.on_reset()
         self._reset_driver = True
         return mode
@@ -560,7 +574,7 @@ class Session:
         with self._lock:
             self.fault = reason
             self._teleop = TeleopState()
-            self.teleop_armed = False
+            self._disarm_teleop()
         self.modes.enter(Mode.FAULT, reason)
 
     def _fault_condition(self, now: float) -> str | None:

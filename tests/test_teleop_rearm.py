@@ -61,3 +61,18 @@ def test_a_fault_reset_needs_a_fresh_command_too() -> None:
     assert not any(hold(s, TURN, 0.5)) and s.last_command.is_zero()
     assert s.set_teleop(Twist2D(), "dashboard") and all(hold(s, TURN, 0.5))
     assert s.last_command.wz > 0.3
+
+
+def test_a_client_that_let_go_before_the_estop_drives_on_its_next_press() -> None:
+    """Only a motion held through the e-stop or reset is disarmed: a key released before it (or a
+    client that was not driving) is a fresh press afterwards."""
+    s = make_session()
+    s.request_mode("teleop")
+    hold(s, TURN, 0.3)
+    assert s.set_teleop(Twist2D(), "dashboard")  # released before the e-stop
+    s.estop("another client")
+    s.run_for(0.3)
+    assert s.reset() == Mode.IDLE
+    s.request_mode("teleop")
+    assert all(hold(s, TURN, 0.5)) and s.last_command.wz > 0.3
+    assert s.set_teleop(Twist2D(0.1, 0.0, 0.0), "another client")  # never held anything

@@ -182,11 +182,8 @@ async def teleop(ws: WebSocket) -> None:
                 await _send(ws, {"type": "error", **exc.as_dict()})
                 continue
             mode = session.modes.mode
-            if not session.teleop_armed and mode in (Mode.IDLE, Mode.TELEOP, Mode.MAPPING):
-                if cmd.is_zero():  # the key released, the stick centred: re-armed, whatever the mode
-                    session.set_teleop(cmd, client_id)
-                    told_to_rearm = False
-                    continue
+            armed = session.teleop_input(cmd, client_id)  # noted in any mode: a release re-arms
+            if not armed and mode in (Mode.IDLE, Mode.TELEOP, Mode.MAPPING):
                 if not told_to_rearm:
                     await _send(ws, {"type": "error", "error": TELEOP_REARM_REASON, "mode": mode.value})
                 told_to_rearm = True
