@@ -223,7 +223,7 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         assert json.loads(ws.recv(timeout=10))["mode"] == "fault"
         r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
         assert r.status_code == 409 and r.json()["mode"] == "fault"
-        stopped = pair.pump.truth_pose
+        stopped = settled(pair)
         time.sleep(0.3)
         assert pair.pump.truth_pose.distance_to(stopped) < 0.005  # the motors are off
 
@@ -365,7 +365,7 @@ def test_maps_over_the_hardware_path(pair: EmulatorPair, patient_server: Embedde
 def docs_diff_profile(tmp_path: Path) -> Path:
     """The minimal differential-drive profile of docs/profiles.md, copied literally into a file."""
     text = (ROOT / "docs" / "profiles.md").read_text()
-    after = text.split("A minimal differential-drive profile:", 1)[1]
+    after = text.split("A minimal differential-drive profile", 1)[1]
     block = after.split("```toml\n", 1)[1].split("```", 1)[0]
     path = tmp_path / "mybot.toml"
     path.write_text(block)
