@@ -34,6 +34,11 @@ from robot.odometry import WheelOdometry
 
 log = logging.getLogger("navdeck.session")
 
+TELEOP_REARM_REASON = (
+    "release the controls first: after an e-stop or a fault reset the robot moves only on a fresh "
+    "command (key released and pressed again, joystick back through zero)"
+)
+
 
 class Stage(Protocol):
     """A pipeline stage run by the control loop (SLAM, localization, costmaps, navigation...).
@@ -155,6 +160,11 @@ class Session:
         self.stats = LoopStats()
         self.fault_monitor = FaultMonitor(self.period, options.faults)
         self._teleop = TeleopState()
+        # Clients whose latest teleop input is a motion (a key held, a stick deflected), and those of
+        # them disarmed by an e-stop, fault or reset: they drive again only after a zero input, so a
+        # key held through a reset does not move the robot the moment it is re-armed.
+        self._teleop_holding: set[str] = set()
+        self._teleop_disarmed: set[str] = set()
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
         self._seq = 0
@@ -182,15 +192,20 @@ class Session:
         self.started_at = self.clock.now()
 
     # ------------------------------------------------------------------ commands from other threads
-    def set_teleop(self, cmd: Twist2D, client: str) -> None:
+    def set_teleop(self, cmd: Twist2D, client: str) -> bool:
         """Store an operator's velocity command (teleop websocket). Applied while the mode allows it,
         and sent at once (reflex path) so it reaches the driver without waiting for the next tick.
 
         A command beyond the sanity bound (``app.limits.sanity_check``: 2x the profile's limits) is
         refused: the robot is stopped (teleop zeroed) and ``CommandRefused`` raised for the caller
-        to report. Commands a little over the limits are clamped later, and reported, as usual."""
+        to report. Commands a little over the limits are clamped later, and reported, as usual.
+        False (ignored, ``TELEOP_REARM_REASON``): a motion command before the zero command that
+        re-arms teleop after an e-stop, fault or reset."""
         self.check_teleop(cmd, client)
+        if not self.teleop_input(cmd, client):
+            return False
         self._store_teleop(cmd, client)
+        return True
 
     def check_teleop(self, cmd: Twist2D, client: str) -> None:
         """Raise ``CommandRefused`` for a command beyond the sanity bound, after stopping the robot
@@ -220,6 +235,21 @@ class Session:
             self._reflex(schedule_ramp_end=True)
         self._wake.set()
 
+    def teleop_input(self, cmd: Twist2D, client: str) -> bool:
+        """Note an operator's latest input, whether or not the mode lets it drive; False while the
+        client is disarmed (``TELEOP_REARM_REASON``): a motion held since an e-stop, fault or reset."""
+        with self._lock:
+            if cmd.is_zero():
+                self._teleop_holding.discard(client)
+                self._teleop_disarmed.discard(client)
+                return True
+            self._teleop_holding.add(client)
+            return client not in self._teleop_disarmed
+
+    def _disarm_teleop(self) -> None:
+        """Every client holding a motion must let go before it drives again (call under ``_lock``)."""
+        self._teleop_disarmed |= self._teleop_holding
+
     def stop_teleop(self, client: str | None = None) -> None:
         with self._lock:
             if client is None or self._teleop.client in (client, None):
@@ -234,6 +264,7 @@ class Session:
         with self._lock:
             self.estop_latched = True
             self._teleop = TeleopState()
+            self._disarm_teleop()
         self.modes.enter(Mode.ESTOP, f"e-stop by {source}")
 
     def reset(self) -> Mode:
@@ -243,6 +274,8 @@ class Session:
         with self._lock:
             self.estop_latched = False
             self.fault = None
+            self._teleop = TeleopState()
+            self._disarm_teleop()  # also a motion held during the e-stop: only a zero input re-arms
         self.fault_monitor.on_reset()
         self._reset_driver = True
         return mode
@@ -541,6 +574,7 @@ class Session:
         with self._lock:
             self.fault = reason
             self._teleop = TeleopState()
+            self._disarm_teleop()
         self.modes.enter(Mode.FAULT, reason)
 
     def _fault_condition(self, now: float) -> str | None:

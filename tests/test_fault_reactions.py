@@ -76,6 +76,7 @@ def reset_refused(s: Session, match: str) -> None:
 def drives_again(s: Session) -> None:
     assert s.reset() == Mode.IDLE
     s.request_mode("teleop")
+    tick(s, Twist2D())  # the operator lets go first: a reset re-arms teleop only on a zero command
     start = s.pose
     for _ in range(20):
         tick(s, STRAIGHT)
@@ -137,6 +138,7 @@ def test_encoder_slip_faults_and_refaults_until_repaired(rig) -> None:
     s.run_for(0.5)
     assert s.reset() == Mode.IDLE  # slip cannot be judged standing: reset allowed ...
     s.request_mode("teleop")
+    tick(s, Twist2D())  # a fresh command after the reset (see drives_again)
     assert drive_until_fault(s, STRAIGHT, 3.0) <= 1.5  # ... and it faults again while the slip lasts
     s.driver.faults.clear()
     s.run_for(0.5)

@@ -26,6 +26,7 @@ from robot.calibration import (
 )
 from robot.profiles import PROFILE_DIR, load_profile, profile_from_dict
 from robot.serial.emulate import EmulatorPair
+from robot.serial.protocol import ParamId
 
 TRUE = load_profile("skid4")
 OMNI = load_profile("omni4")
@@ -242,7 +243,9 @@ def test_calibrate_over_serial_recovers_a_wrong_wheel_radius(tmp_path: Path, mon
         tape = TruthTape(pair)
         monkeypatch.setattr("builtins.input", tape.answer)
         out = tmp_path / "cal.toml"
-        argv = ["calibrate", "--robot", pair.url(), "--profile", str(wrong_toml(tmp_path))]
+        url = pair.url() + "?link_timeout=1.0"  # a starved emulator is not what is calibrated here
+        pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
+        argv = ["calibrate", "--robot", url, "--profile", str(wrong_toml(tmp_path))]
         argv += ["--distance", "0.5", "--speed", "0.25", "--turns", "0.6", "--turn-speed", "1.0"]
         try:
             rc = main([*argv, "--yes", "--write", str(out), "--set-firmware"])

@@ -13,7 +13,7 @@ import pytest
 
 from robot.base import LinkState, LinkStatus
 from robot.profiles import load_profile
-from robot.serial.driver import SerialDriver, wait_for
+from robot.serial.driver import SerialDriver, SerialOptions, wait_for
 from robot.serial.emulate import EmulatorPair
 
 PROFILE = load_profile("skid4")
@@ -26,14 +26,16 @@ def pair(tmp_path) -> Iterator[EmulatorPair]:
 
 
 def test_stalled_reader_with_bytes_waiting_is_late_not_lost(pair: EmulatorPair) -> None:
-    driver = SerialDriver(pair.base_path, PROFILE)  # default 300 ms link timeout
+    # a 1 s link timeout stalled for 1.5 s: "late" lasts up to 5 timeouts, so the check may come up
+    # to 3.5 s after it on a loaded machine and still see the stall it is about
+    driver = SerialDriver(SerialOptions(pair.base_path, link_timeout=1.0), PROFILE)
     try:
         assert wait_for(lambda: driver.read().link.rx_frames > 10, timeout=10.0)
         out: list[LinkStatus] = []
         # The reader thread blocks in its next keep-alive write (as on a USB adapter whose write
         # hangs for a while); the base keeps sending telemetry into the OS buffer meanwhile.
         with driver._base._write_lock:
-            time.sleep(0.6)
+            time.sleep(1.5)
             assert driver._base._backlog() > 0
             checker = threading.Thread(target=lambda: out.append(driver.read().link))
             checker.start()

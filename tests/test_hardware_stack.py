@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import importlib
 import json
+import math
 import pkgutil
 import subprocess
 import sys
@@ -28,7 +29,7 @@ from nav.types import Pose2D
 from robot.profiles import load_profile
 from robot.serial.driver import wait_for
 from robot.serial.emulate import EmulatorPair
-from robot.serial.protocol import EStop, Reset
+from robot.serial.protocol import EStop, ParamId, Reset, VelocityCommand
 from robot.serial.pty import PtyPort
 
 PROFILE = load_profile("skid4")
@@ -63,8 +64,8 @@ def make_settings(tmp_path: Path, **overrides: object) -> Settings:
     return Settings(**{**base, **overrides})
 
 
-def twist(vx: float = 0.0, wz: float = 0.0) -> str:
-    return json.dumps({"linear": {"x": vx, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
+def twist(vx: float = 0.0, wz: float = 0.0, vy: float = 0.0) -> str:
+    return json.dumps({"linear": {"x": vx, "y": vy, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
 
 
 def drive(ws, seconds: float, vx: float = 0.0, wz: float = 0.0) -> None:
@@ -73,6 +74,40 @@ def drive(ws, seconds: float, vx: float = 0.0, wz: float = 0.0) -> None:
     while time.monotonic() < end:
         ws.send(twist(vx, wz))
         time.sleep(0.1)
+
+
+def drive_until(ws, done, timeout: float = 15.0, vx: float = 0.0, vy: float = 0.0, wz: float = 0.0) -> bool:
+    """Send teleop commands at 10 Hz until ``done()`` (or ``timeout`` s), then a stop: how far the robot
+    got is the condition, not how long it drove, so a starved machine only makes it take longer."""
+    end = time.monotonic() + timeout
+    while not (reached := done()) and time.monotonic() < end:
+        ws.send(twist(vx, wz, vy))
+        time.sleep(0.1)
+    ws.send(twist())
+    return reached
+
+
+def moved_beyond(pair: EmulatorPair, far: float, turn: bool = False):
+    """A ``drive_until`` condition: the robot turned ``far`` rad (``turn``) or went ``far`` m from here."""
+    before = pair.pump.truth_pose
+
+    def done() -> bool:
+        moved = pair.pump.truth_pose.relative_to(before)
+        return (abs(moved.theta) if turn else math.hypot(moved.x, moved.y)) > far
+
+    return done
+
+
+def settled(pair: EmulatorPair, timeout: float = 10.0) -> Pose2D:
+    """Wait until the emulated robot stands still (0.3 s without moving 1 mm); its true pose then."""
+
+    def still() -> bool:
+        before = pair.pump.truth_pose
+        time.sleep(0.3)
+        return pair.pump.truth_pose.distance_to(before) < 0.001
+
+    assert wait_for(still, timeout=timeout, period=0.0)
+    return pair.pump.truth_pose
 
 
 def hello(ws) -> dict:
@@ -99,11 +134,18 @@ def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
     yield from _serve(tmp_path, pair.url())
 
 
+def patient(pair: EmulatorPair) -> str:
+    """For tests about something else than the watchdogs: a 1 s firmware command watchdog and a 1 s
+    host link watchdog, so threads starved for 300 ms on a loaded CI machine fault nothing (a pulled
+    port still faults at once). The robot URL to serve."""
+    pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
+    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0"
+
+
 @pytest.fixture
 def patient_server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
-    """A 1 s link watchdog: the emulator's threads, starved for 300 ms on a loaded CI machine,
-    must not fault the link before a test pulls the plug (a pulled port faults at once)."""
-    yield from _serve(tmp_path, pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0")
+    """A server on ``patient`` watchdogs."""
+    yield from _serve(tmp_path, patient(pair))
 
 
 def commands_seen(pair: EmulatorPair, kind: type) -> list:
@@ -111,26 +153,27 @@ def commands_seen(pair: EmulatorPair, kind: type) -> list:
 
 
 def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
-    pair: EmulatorPair, server: EmbeddedServer
+    pair: EmulatorPair, patient_server: EmbeddedServer
 ) -> None:
+    server = patient_server
     session = server.runtime.session
     truth0 = pair.pump.truth_pose
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         assert hello(ws)["driving"] is True
-        drive(ws, 1.2, vx=0.2)
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(truth0) > 0.15, vx=0.2)
         assert session.modes.mode.value == "teleop", session.fault
         assert session.fault is None, session.fault
         # odometry from the serial encoder counts follows the emulated robot's true motion
-        moved_truth = pair.pump.truth_pose.distance_to(truth0)
-        moved_odom = session.odom_pose.distance_to(Pose2D())
-        assert 0.1 < moved_truth < 0.3, moved_truth
-        assert moved_odom == pytest.approx(moved_truth, abs=0.03)
+        moved_truth = settled(pair).distance_to(truth0)
+        assert wait_for(
+            lambda: session.odom_pose.distance_to(Pose2D()) == pytest.approx(moved_truth, abs=0.03),
+            timeout=5.0,
+        ), (session.odom_pose, moved_truth)
         assert session.health()["link"] == "ok"
         assert session.last_scan is not None and session.health()["scan_age_s"] < 1.0
         # the robot turns too, and the gyro-fused heading follows the truth
         th0 = session.odom_pose.theta
-        drive(ws, 0.8, wz=0.8)
-        assert session.odom_pose.theta - th0 > 0.3
+        assert drive_until(ws, lambda: session.odom_pose.theta - th0 > 0.3, wz=0.8)
 
         r = httpx.post(f"{server.url}/api/robot/estop", timeout=10)
         assert r.status_code == 200 and r.json()["mode"] == "estop"
@@ -140,17 +183,18 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
         ws.send(twist(vx=0.2))
         err = json.loads(ws.recv(timeout=10))
         assert err["type"] == "error" and err["mode"] == "estop"
-        time.sleep(0.3)
-        settled = pair.pump.truth_pose
+        resting = settled(pair)
+        ws.send(twist(vx=0.2))
         time.sleep(0.4)
-        assert pair.pump.truth_pose.distance_to(settled) < 0.005
+        assert pair.pump.truth_pose.distance_to(resting) < 0.005
 
         r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
         assert r.status_code == 200 and r.json()["mode"] == "idle"
         assert wait_for(lambda: not pair.base.estopped, timeout=2.0)
         assert commands_seen(pair, Reset)
-        drive(ws, 0.6, vx=0.15)
-        assert pair.pump.truth_pose.distance_to(settled) > 0.03  # drives again after the reset
+        # drives again after the reset, on a fresh command (the key released first)
+        ws.send(twist())
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(resting) > 0.03, vx=0.15)
 
 
 def test_unplug_faults_and_stops_then_replug_recovers(
@@ -160,7 +204,8 @@ def test_unplug_faults_and_stops_then_replug_recovers(
     session = server.runtime.session
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         hello(ws)
-        drive(ws, 0.6, vx=0.15)
+        start = pair.pump.truth_pose
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(start) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
         pair.base.unplug()
         t0 = time.monotonic()
@@ -178,7 +223,7 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         assert json.loads(ws.recv(timeout=10))["mode"] == "fault"
         r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
         assert r.status_code == 409 and r.json()["mode"] == "fault"
-        stopped = pair.pump.truth_pose
+        stopped = settled(pair)
         time.sleep(0.3)
         assert pair.pump.truth_pose.distance_to(stopped) < 0.005  # the motors are off
 
@@ -188,11 +233,11 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         r = httpx.post(f"{server.url}/api/robot/reset", timeout=10)
         assert r.status_code == 200, r.text
         assert r.json()["mode"] == "idle" and r.json()["fault"] is None
-        # and the robot can be driven again
+        # and the robot can be driven again, on a fresh command
+        ws.send(twist())
         before = pair.pump.truth_pose
-        drive(ws, 0.6, vx=0.15)
+        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(before) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
-        assert pair.pump.truth_pose.distance_to(before) > 0.03
 
 
 def test_silent_base_faults_after_the_link_timeout(pair: EmulatorPair, server: EmbeddedServer) -> None:
@@ -288,9 +333,10 @@ def test_busy_port_exits_2_with_one_line(tmp_path: Path, capsys: pytest.CaptureF
     assert "\n" not in err and "busy" in err and port.path in err, err
 
 
-def test_maps_over_the_hardware_path(pair: EmulatorPair, server: EmbeddedServer) -> None:
+def test_maps_over_the_hardware_path(pair: EmulatorPair, patient_server: EmbeddedServer) -> None:
     """Mapping is driver-agnostic: scans from the emulated RPLidar and odometry from the serial encoder
     counts build and save a map, like with ``--robot sim``."""
+    server = patient_server
     rt = server.runtime
     with httpx.Client(base_url=server.url, timeout=20) as api:
         r = api.post("/api/mapping/start")
@@ -299,9 +345,9 @@ def test_maps_over_the_hardware_path(pair: EmulatorPair, server: EmbeddedServer)
             hello(ws)
             ws.send(json.dumps({"type": "take_control"}))
             assert json.loads(ws.recv(timeout=10))["driving"]
-            drive(ws, 3.0, vx=0.2)
-            drive(ws, 1.5, wz=0.8)
-            drive(ws, 2.0, vx=0.2)
+            # as far as 3 s, 1.5 s and 2 s of driving take an unloaded machine
+            for move, far in ((dict(vx=0.2), 0.5), (dict(wz=0.8), 1.0), (dict(vx=0.2), 0.35)):
+                assert drive_until(ws, moved_beyond(pair, far, "wz" in move), **move), rt.session.fault
         assert pair.pump.truth_pose.distance_to(Pose2D()) > 0 and rt.session.fault is None, rt.session.fault
         state = api.get("/api/mapping").json()
         r = api.post("/api/mapping/stop")
@@ -314,3 +360,91 @@ def test_maps_over_the_hardware_path(pair: EmulatorPair, server: EmbeddedServer)
     known = (grid.data >= 0).sum() * grid.resolution**2
     occupied = (grid.data >= 65).sum()
     assert known > 2.0 and occupied > 50, (known, occupied, state)
+
+
+def docs_diff_profile(tmp_path: Path) -> Path:
+    """The minimal differential-drive profile of docs/profiles.md, copied literally into a file."""
+    text = (ROOT / "docs" / "profiles.md").read_text()
+    after = text.split("A minimal differential-drive profile", 1)[1]
+    block = after.split("```toml\n", 1)[1].split("```", 1)[0]
+    path = tmp_path / "mybot.toml"
+    path.write_text(block)
+    return path
+
+
+@pytest.mark.parametrize("kind", ["docs-diff", "skid4", "omni4"])
+def test_each_kinematics_is_served_over_the_emulators_and_driven_by_teleop(tmp_path: Path, kind: str) -> None:
+    """Issue 23 item 1: a 2-wheel diff base (the docs' example as written), 4-wheel skid and 4-wheel
+    omni, each behind the emulated base and lidar, served and driven by teleop; the odometry built from
+    the serial encoder counts (2 or 4 of the 4 wire channels) follows the robot's true motion."""
+    profile_arg = str(docs_diff_profile(tmp_path)) if kind == "docs-diff" else kind
+    profile = load_profile(profile_arg)
+    with EmulatorPair(profile, world="box", link_dir=tmp_path / "dev", seed=5) as pair:
+        url = patient(pair)  # a starved emulator thread is not what is tested here
+        with serve_in_thread(make_settings(tmp_path, robot=url, profile=profile_arg)) as server:
+            session = server.runtime.session
+            assert session.profile.kinematics == profile.kinematics
+            assert wait_for(lambda: session.last_scan is not None, timeout=10.0), session.fault
+            with connect(f"{server.ws_url}/ws/teleop") as ws:
+                assert hello(ws)["driving"] is True
+                start = pair.pump.truth_pose
+                moves = [dict(vx=0.15), dict(wz=0.6)] + ([dict(vy=0.15)] if profile.is_omni else [])
+                for move in moves:
+                    before = pair.pump.truth_pose
+                    turn = "wz" in move
+                    reached = drive_until(ws, moved_beyond(pair, 0.4 if turn else 0.12, turn), **move)
+                    assert reached and session.fault is None, (move, session.fault)
+                    assert session.modes.mode.value == "teleop"
+                    moved = settled(pair).relative_to(before)
+                    # the robot went the way it was told (REP-103: x forward, y left, CCW positive)
+                    if "vx" in move:
+                        assert moved.x > 0.1 and abs(moved.y) < 0.3 * moved.x, moved
+                    elif "vy" in move:
+                        assert moved.y > 0.1 and abs(moved.x) < 0.3 * moved.y, moved
+                    else:
+                        assert moved.theta > 0.4 and math.hypot(moved.x, moved.y) < 0.1, moved
+                truth = pair.pump.truth_pose.relative_to(start)
+                # the odometry catches up with the settled robot (the control loop may lag a tick)
+                assert wait_for(
+                    lambda: (
+                        session.odom_pose.distance_to(truth) < 0.03
+                        and abs(session.odom_pose.relative_to(truth).theta) < 0.05
+                    ),
+                    timeout=5.0,
+                ), (session.odom_pose, truth)
+                assert session.fault is None and session.health()["link"] == "ok"
+
+
+def test_a_key_held_through_a_reset_does_not_move_the_robot(
+    pair: EmulatorPair, patient_server: EmbeddedServer
+) -> None:
+    """Issue 23 item 4: another client resets the e-stop while the dashboard still holds a key. The
+    held key's commands are refused (once, with the reason) and the base gets only zero velocities
+    until the key is released and pressed again."""
+    server = patient_server
+    session = server.runtime.session
+    with connect(f"{server.ws_url}/ws/teleop") as ws:
+        hello(ws)
+        assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)
+        assert httpx.post(f"{server.url}/api/robot/estop", timeout=10).status_code == 200
+        ws.send(twist(wz=0.6))  # held
+        assert json.loads(ws.recv(timeout=10))["mode"] == "estop"
+        assert httpx.post(f"{server.url}/api/robot/reset", timeout=10).json()["mode"] == "idle"
+        resting = settled(pair)
+        sent_before = len(pair.base.message_log)
+        for _ in range(10):  # the key is still down: the dashboard resends it at 10 Hz
+            ws.send(twist(wz=0.6))
+            time.sleep(0.1)
+        replies = []
+        while not any("release the controls" in r.get("error", "") for r in replies):
+            replies.append(json.loads(ws.recv(timeout=10)))
+        assert sum("release the controls" in r.get("error", "") for r in replies) == 1  # said once
+        assert session.modes.mode.value == "idle"
+        assert pair.pump.truth_pose.distance_to(resting) < 0.005
+        assert abs(pair.pump.truth_pose.relative_to(resting).theta) < 0.005
+        velocities = [
+            m for _, m in list(pair.base.message_log)[sent_before:] if isinstance(m, VelocityCommand)
+        ]
+        assert all(m.vx == 0.0 and m.wz == 0.0 for m in velocities)
+        ws.send(twist())  # released ...
+        assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)  # ... pressed again: it turns

@@ -74,6 +74,7 @@ def test_teleop_mission_with_estop_is_one_run_with_events_and_metrics(rig) -> No
     session.reset()
     step(session, rec, 1.0)  # idle < grace: same run continues
     session.request_mode("teleop")
+    step(session, rec, session.period, Twist2D())  # the operator let go: a reset re-arms on a zero command
     step(session, rec, 2.0, Twist2D(0.0, 0.0, 0.5))
     session.request_mode("idle")
     step(session, rec, 2.5)  # > idle_grace: the run ends

@@ -1,10 +1,14 @@
-"""SerialDriver against the emulators over real pseudo-terminals (wall time, a few seconds)."""
+"""SerialDriver against the emulators over real pseudo-terminals (wall time, a few seconds).
+
+Motion is driven until it happened (``drive_until``), never for a fixed time followed by a distance or
+count check: a starved emulator thread on a loaded machine only makes a test take longer."""
 
 from __future__ import annotations
 
 import math
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -12,8 +16,10 @@ import serial
 
 from nav.types import Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
+from robot.clock import RealClock
 from robot.profiles import load_profile
 from robot.serial.driver import (
+    BaseLink,
     SerialDriver,
     SerialOptions,
     SerialUrlError,
@@ -34,6 +40,7 @@ from robot.serial.protocol import (
     VelocityCommand,
 )
 from robot.serial.protocol import encode as encode_msg
+from robot.serial.pty import PtyPort
 
 PROFILE = load_profile("skid4")
 
@@ -75,8 +82,49 @@ def drive(d: SerialDriver, cmd: Twist2D, seconds: float, period: float = 0.05) -
     return frames
 
 
+def drive_until(
+    d: SerialDriver, cmd: Twist2D, done, timeout: float = 30.0, period: float = 0.05
+) -> list[SensorFrame]:
+    """Run a 20 Hz control loop until ``done(frames so far)`` (or ``timeout`` s, then fail)."""
+    frames: list[SensorFrame] = []
+    end = time.monotonic() + timeout
+    while True:
+        d.command(cmd)
+        frames.append(d.read())
+        if done(frames):
+            return frames
+        assert time.monotonic() < end, f"not done after {timeout} s: {frames[-1]}"
+        time.sleep(period)
+
+
 def last_ticks(frames: list[SensorFrame]) -> np.ndarray:
     return next(f.ticks.counts for f in reversed(frames) if f.ticks is not None)
+
+
+def ticks_beyond(limit: float, sign: float = 1.0):
+    """A ``drive_until`` condition: every wheel's count past ``sign * limit``."""
+
+    def done(frames: list[SensorFrame]) -> bool:
+        ticks = [f.ticks.counts for f in frames if f.ticks is not None]
+        return bool(ticks) and bool(np.all(sign * ticks[-1] > limit))
+
+    return done
+
+
+def still(pair: EmulatorPair, d: SerialDriver) -> np.ndarray:
+    """Hold a zero command until the emulated robot stands still and its counts stop changing; the
+    counts then."""
+    seen: list[np.ndarray] = []
+
+    def settled(frames: list[SensorFrame]) -> bool:
+        if frames[-1].ticks is not None:
+            seen.append(frames[-1].ticks.counts)
+        return (
+            pair.pump.sim.truth_velocity.is_zero() and len(seen) >= 3 and bool(np.all(seen[-1] == seen[-3]))
+        )
+
+    drive_until(d, Twist2D(), settled)
+    return seen[-1]
 
 
 # ---------------------------------------------------------------------------------------- URL parsing
@@ -135,15 +183,20 @@ def test_implements_driver_protocol(driver: SerialDriver) -> None:
 
 
 def test_drives_ticks_advance_scans_arrive(pair: EmulatorPair, driver: SerialDriver) -> None:
-    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 1.2)
-    assert all(f.link.state is LinkState.OK for f in frames[3:])  # link_timeout 1 s in this fixture
-    counts = last_ticks(frames)
-    # 0.2 m/s for ~1 s on 65 mm wheels at 1320 ticks/rev: ~1100 ticks (minus the acceleration ramp)
-    assert np.all(counts > 700), counts
+    advanced = ticks_beyond(700)  # ~0.11 m on 65 mm wheels at 1320 ticks/rev
+
+    def done(frames: list[SensorFrame]) -> bool:
+        return advanced(frames) and sum(f.scan is not None for f in frames) >= 3
+
+    frames = drive_until(driver, Twist2D(0.2, 0.0, 0.0), done)
+    assert all(f.link.state is not LinkState.LOST for f in frames)  # link_timeout 1 s in this fixture
+    counts = still(pair, driver)
     assert np.all(np.abs(counts - counts.mean()) < 0.05 * counts.mean())  # straight: wheels agree
-    assert pair.pump.truth_pose.x > pair.pump.sim.world.start_pose.x + 0.12
+    # the counts measure the distance the robot really drove (2 pi r per ticks_per_rev)
+    travelled = pair.pump.truth_pose.x - pair.pump.sim.world.start_pose.x
+    metres = counts.mean() * 2 * math.pi * PROFILE.wheel_radius / PROFILE.ticks_per_rev
+    assert metres == pytest.approx(travelled, rel=0.03), (metres, travelled)
     scans = [f.scan for f in frames if f.scan is not None]
-    assert len(scans) >= 3  # 5.5 Hz
     s = scans[-1]
     assert s.ranges.shape == (PROFILE.lidar.beams,)
     # in the 6 x 4 m box the robot sees walls all round: most beams measured and finite
@@ -154,9 +207,19 @@ def test_drives_ticks_advance_scans_arrive(pair: EmulatorPair, driver: SerialDri
 
 
 def test_turn_gyro_and_scan_rotate_consistently(pair: EmulatorPair, driver: SerialDriver) -> None:
-    frames = drive(driver, Twist2D(0.0, 0.0, 0.8), 1.0)
-    gyro = [f.imu.gyro_z for f in frames[-8:] if f.imu is not None]
-    assert np.median(gyro) == pytest.approx(0.8, abs=0.1)
+    turning: list[tuple[float, float]] = []  # (stamp, gyro) once the robot turns at the commanded rate
+
+    def eight_at_speed(frames: list[SensorFrame]) -> bool:
+        imu = frames[-1].imu
+        if imu is not None and pair.pump.sim.truth_velocity.wz == pytest.approx(0.8):
+            turning.append((imu.stamp, imu.gyro_z))
+        return len(turning) >= 9
+
+    frames = drive_until(driver, Twist2D(0.0, 0.0, 0.8), eight_at_speed)
+    # each reading is the mean rate since the previous one: weighted by those intervals (a starved
+    # emulator sends a stalled frame's 0 and then the catch-up), it is the steady rate
+    stamps, gyro = np.array(turning).T
+    assert np.sum(gyro[1:] * np.diff(stamps)) / (stamps[-1] - stamps[0]) == pytest.approx(0.8, abs=0.1)
     counts = last_ticks(frames)
     assert counts[0] < 0 < counts[2]  # left wheels back, right wheels forward (CCW)
 
@@ -174,18 +237,24 @@ def test_lidar_scan_matches_world(pair: EmulatorPair, driver: SerialDriver) -> N
     assert left == pytest.approx(1.9, abs=0.1)
 
 
+def estop_reported(d: SerialDriver) -> bool:
+    return d.telemetry is not None and bool(d.telemetry.status & Status.ESTOP_LATCHED)
+
+
 def test_estop_latches_until_reset(pair: EmulatorPair, driver: SerialDriver) -> None:
-    drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6)
+    drive_until(driver, Twist2D(0.2, 0.0, 0.0), ticks_beyond(200))
     driver.estop()
-    time.sleep(0.1)
-    before = last_ticks(drive(driver, Twist2D(0.2, 0.0, 0.0), 0.2))
-    after = last_ticks(drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6))
+    assert wait_for(lambda: pair.base.estopped, timeout=10.0)
+    drive_until(driver, Twist2D(0.2, 0.0, 0.0), lambda fs: estop_reported(driver))
+    before = still(pair, driver)
+    # commands keep coming while latched; the base ignores them
+    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6)
+    assert pair.base.last_command is not None and pair.base.last_command.vx == pytest.approx(0.2)
+    after = last_ticks(frames) if any(f.ticks is not None for f in frames) else before
     assert np.all(np.abs(after - before) <= 2), (before, after)
-    assert driver.telemetry is not None and driver.telemetry.status & Status.ESTOP_LATCHED
+    assert pair.pump.sim.truth_velocity.is_zero()
     driver.reset()
-    time.sleep(0.1)
-    moved = last_ticks(drive(driver, Twist2D(0.2, 0.0, 0.0), 0.6))
-    assert np.all(moved - after > 200)
+    drive_until(driver, Twist2D(0.2, 0.0, 0.0), ticks_beyond(200 + after.max()))
 
 
 def test_unplug_lost_within_300ms_then_recovers(pair: EmulatorPair, strict_driver: SerialDriver) -> None:
@@ -210,9 +279,8 @@ def test_unplug_lost_within_300ms_then_recovers(pair: EmulatorPair, strict_drive
     # After recovery the held command was zeroed: the base got no motion until a new command.
     time.sleep(0.2)
     assert pair.base.last_command is None or pair.base.last_command.vx == 0.0
-    before = last_ticks(drive(driver, Twist2D(0.15, 0.0, 0.0), 0.1))
-    after = last_ticks(drive(driver, Twist2D(0.15, 0.0, 0.0), 0.6))
-    assert np.all(after - before > 150)
+    before = last_ticks(drive_until(driver, Twist2D(0.15, 0.0, 0.0), ticks_beyond(-1e12)))
+    drive_until(driver, Twist2D(0.15, 0.0, 0.0), ticks_beyond(150 + before.max()))
 
 
 def test_stall_is_lost_and_recovers_without_reconnect(
@@ -253,10 +321,15 @@ def test_firmware_watchdog_stops_motors(pair: EmulatorPair) -> None:
 
 
 def test_keepalive_holds_command_between_slow_ticks(pair: EmulatorPair, driver: SerialDriver) -> None:
-    """A 5 Hz control loop (slower than the 200 ms firmware watchdog) still drives smoothly."""
-    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 1.0, period=0.2)
-    assert not pair.base.watchdog_fired
-    assert np.all(last_ticks(frames) > 700)
+    """A 5 Hz control loop (slower than the 200 ms firmware watchdog) still drives: between its
+    commands the reader thread resends the held velocity (every 50 ms), so more VELOCITY frames reach
+    the base than the loop wrote, all of them the held command."""
+    sent_before = len(driver.sent_log)
+    frames = drive_until(driver, Twist2D(0.2, 0.0, 0.0), ticks_beyond(700), period=0.2)
+    received = [m for _, m in pair.base.message_log if isinstance(m, VelocityCommand)]
+    sent = [m for _, m in list(driver.sent_log)[sent_before:] if isinstance(m, VelocityCommand)]
+    assert len(sent) > len(frames) and len(received) >= len(frames)
+    assert all(m.vx == pytest.approx(0.2) for m in sent)
 
 
 def test_dead_control_loop_lets_the_base_stop(pair: EmulatorPair, driver: SerialDriver) -> None:
@@ -273,13 +346,13 @@ def test_obstacle_stop_reported(tmp_path) -> None:
     with EmulatorPair(PROFILE, world="box", link_dir=tmp_path, start_pose=start, lidar=False) as pair:
         d = SerialDriver(pair.base_path, PROFILE)
         try:
-            frames = drive(d, Twist2D(0.2, 0.0, 0.0), 0.6)
-            assert frames[-1].base_stopped_by_obstacle
+            frames = drive_until(d, Twist2D(0.2, 0.0, 0.0), lambda fs: fs[-1].base_stopped_by_obstacle)
             assert frames[-1].ir is not None and frames[-1].ir.triggered.all()
+            frames = drive(d, Twist2D(0.2, 0.0, 0.0), 0.5)  # pushing on: still held
+            assert all(f.base_stopped_by_obstacle for f in frames if f.ticks is not None)  # new telemetry
             assert np.all(np.abs(last_ticks(frames)) < 30)
             # reversing away is allowed: the interrupt only blocks forward motion
-            back = drive(d, Twist2D(-0.1, 0.0, 0.0), 0.5)
-            assert np.all(last_ticks(back) < -50)
+            drive_until(d, Twist2D(-0.1, 0.0, 0.0), ticks_beyond(50, sign=-1.0))
         finally:
             d.close()
 
@@ -299,10 +372,11 @@ def test_parameters_get_set(pair: EmulatorPair, driver: SerialDriver) -> None:
 def test_noisy_line_counts_bad_frames_and_keeps_driving(pair: EmulatorPair, driver: SerialDriver) -> None:
     pair.base.faults.corrupt_prob = 0.003
     pair.base.faults.drop_prob = 0.003
-    frames = drive(driver, Twist2D(0.2, 0.0, 0.0), 1.0)
-    assert frames[-1].link.bad_frames > 0
-    assert frames[-1].link.state is not LinkState.LOST
-    assert np.all(last_ticks(frames) > 600)
+    advanced = ticks_beyond(600)
+    frames = drive_until(
+        driver, Twist2D(0.2, 0.0, 0.0), lambda fs: advanced(fs) and fs[-1].link.bad_frames > 0
+    )
+    assert all(f.link.state is not LinkState.LOST for f in frames)
 
 
 def test_lidar_health_error_becomes_fault(tmp_path) -> None:
@@ -358,3 +432,99 @@ def test_wrong_device_on_the_base_port_is_diagnosed(pair: EmulatorPair) -> None:
         assert seen[-1].state is LinkState.LOST
     finally:
         d.close()
+
+
+# ---------------------------------------------------------------------------------------- wheel counts
+@pytest.mark.parametrize("kinematics", ["diff", "skid", "omni"])
+def test_each_kinematics_reads_its_wheels_from_the_four_wire_channels(tmp_path, kinematics: str) -> None:
+    """Issue 23 item 1: Telemetry always carries four counters; a 2-wheel diff base fills L, R and the
+    host must take two of them (it used to crash the reader thread on a (2,) vs (4,) broadcast)."""
+    profile = replace(PROFILE, kinematics=kinematics)
+    with EmulatorPair(profile, world="box", link_dir=tmp_path, seed=2, lidar=False) as pair:
+        d = SerialDriver(SerialOptions(pair.base_path, link_timeout=1.0), profile)
+        try:
+            counts: list[np.ndarray] = []
+
+            def turned_a_wheel() -> bool:
+                d.command(Twist2D(0.0, 0.0, 0.6))
+                frame = d.read()
+                assert frame.fault is None, frame.fault
+                if frame.ticks is not None:
+                    counts.append(frame.ticks.counts)
+                return bool(counts) and np.abs(counts[-1]).max() > 100
+
+            assert wait_for(turned_a_wheel, timeout=10.0, period=0.05)
+            assert counts[-1].shape == (profile.wheel_count,)
+            # a CCW turn on the spot: left/right (or all four omni) wheels as the kinematics say
+            if kinematics == "omni":
+                assert np.all(counts[-1] > 0), counts[-1]
+            else:
+                left, right = counts[-1][: profile.wheel_count // 2], counts[-1][profile.wheel_count // 2 :]
+                assert np.all(left < 0) and np.all(right > 0), counts[-1]
+        finally:
+            d.close()
+
+
+# ---------------------------------------------------------------------------------------- dead threads
+def _raise(exc: Exception):
+    def fail(*args: object) -> None:
+        raise exc
+
+    return fail
+
+
+def test_a_crashed_base_reader_is_a_fault_with_its_cause(pair: EmulatorPair, driver: SerialDriver) -> None:
+    """A bug in the reader thread is reported as what it is, never as silence or a wrong baud rate."""
+    assert wait_for(lambda: driver.read().link.state is LinkState.OK, timeout=5.0)
+    driver._base._handle = _raise(ValueError("operands could not be broadcast"))  # type: ignore[method-assign]
+    seen: list[SensorFrame] = []
+
+    def faulted() -> bool:
+        seen.append(driver.read())
+        return seen[-1].fault is not None
+
+    assert wait_for(faulted, timeout=5.0)
+    frame = seen[-1]
+    assert frame.link.state is LinkState.LOST
+    assert "base reader thread" in frame.fault
+    assert "ValueError: operands could not be broadcast" in frame.fault
+    assert "something else" not in frame.fault and "no telemetry" not in frame.fault
+    # it stays that way (nothing can clear it) and nothing is commanded any more
+    time.sleep(0.2)
+    assert "ValueError" in (driver.read().fault or "")
+    refused = driver.refused_commands
+    driver.command(Twist2D(0.2, 0.0, 0.0))
+    assert driver.refused_commands == refused + 1
+    assert pair.base.last_command is not None and pair.base.last_command.vx == 0.0  # the stop went out
+
+
+def test_a_crashed_lidar_reader_is_a_fault_with_its_cause(pair: EmulatorPair, driver: SerialDriver) -> None:
+    assert wait_for(lambda: driver.read().scan is not None, timeout=5.0)
+    assert driver._lidar is not None
+    driver._lidar._on_nodes = _raise(IndexError("bin out of range"))  # type: ignore[method-assign]
+    assert wait_for(lambda: "IndexError: bin out of range" in (driver.read().fault or ""), timeout=5.0)
+    assert "lidar reader thread" in (driver.read().fault or "")
+
+
+def test_gyro_mean_weights_each_frame_by_its_period(tmp_path) -> None:
+    """A base starved for 200 ms sends one frame whose gyro_z is the mean over those 200 ms, then
+    catches up with frames 0.1 ms apart: the rate the odometry integrates is the time-weighted mean
+    (0.2 rad over 0.2 s), not the plain mean of four frames (which lost 3/4 of the turn)."""
+    port = PtyPort(tmp_path / "silent-base")
+    link = BaseLink(SerialOptions(port.path, link_timeout=10.0), RealClock())
+    try:
+
+        def frame(us: int, gyro: float) -> Telemetry:
+            return Telemetry(us, 0, 0, 0, 0, gyro, 0.0, 0.0, 9.81, 0, 12000, 0)
+
+        link._handle([frame(1_000_000, 0.0)])
+        link.take()
+        link._handle([frame(1_200_000, 1.0), frame(1_200_100, 0.0), frame(1_200_200, 0.0)])
+        _, _, _, gyro, new, _ = link.take()
+        assert new and gyro == pytest.approx(0.2 / 0.2002, rel=1e-6)
+        # the first frame after a reboot has no known period: its rate stands alone
+        link._handle([frame(5_000, 0.3)])
+        assert link.take()[3] == pytest.approx(0.3)
+    finally:
+        link.close()
+        port.close()

@@ -28,7 +28,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--no-lidar", action="store_true", help="base only (emulate base)")
     p.add_argument("--link-dir", help="directory for stable device symlinks (default: a new temp dir)")
-    p.add_argument("--sample-rate", type=float, default=2000.0, help="lidar samples per second")
+    p.add_argument(
+        "--sample-rate",
+        type=float,
+        help="lidar samples per second (default: 2000, the A1's, or enough for the profile's beams)",
+    )
     p.add_argument("--drop-prob", type=float, default=0.0, help="probability each sent byte is lost")
     p.add_argument("--corrupt-prob", type=float, default=0.0, help="probability each sent byte is garbled")
     p.add_argument("--duration", type=float, help="exit after this many seconds")
@@ -49,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     for name in ("drop_prob", "corrupt_prob"):
         if not 0.0 <= getattr(args, name) < 1.0:
             raise CliError(f"--{name.replace('_', '-')} must be in [0, 1)")
-    if args.sample_rate <= 0:
+    if args.sample_rate is not None and args.sample_rate <= 0:
         raise CliError("--sample-rate must be positive")
     try:
         pump = SimPump.for_world(args.world, profile, seed=args.seed)

@@ -28,8 +28,9 @@ from nav.types import Twist2D
 from robot.base import ImuReading, IrReading, LinkState, LinkStatus, SensorFrame, WheelTicks
 from robot.clock import Clock, RealClock
 from robot.profiles import RobotProfile
-from robot.serial.port import Backoff, PortUnavailableError, SerialLinkError, open_port
+from robot.serial.port import Backoff, PortUnavailableError, SerialLinkError, describe_crash, open_port
 from robot.serial.protocol import (
+    ENCODER_CHANNELS,
     ErrorCode,
     ErrorReport,
     EStop,
@@ -167,7 +168,7 @@ class _TickUnwrapper:
 class BaseLink:
     """The STM32 link: reader thread, keep-alive, watchdog, reconnect. Used by ``SerialDriver``."""
 
-    def __init__(self, options: SerialOptions, n_wheels: int, clock: Clock) -> None:
+    def __init__(self, options: SerialOptions, clock: Clock) -> None:
         self.options = options
         self.clock = clock
         self._ser: serial.Serial | None = open_port(options.port, options.baud)
@@ -177,17 +178,22 @@ class BaseLink:
         self._decoder = MessageDecoder()
         self._seq = Sequencer()
         self._sync = _ClockSync()
-        self._ticks = _TickUnwrapper(n_wheels)
+        self._ticks = _TickUnwrapper(ENCODER_CHANNELS)  # all four wire channels; the driver takes its wheels
         self._backoff = Backoff(options.reconnect_initial, options.reconnect_max)
         # state shared with the control loop (under _lock)
         self._latest: Telemetry | None = None
         self._latest_stamp = 0.0
         self._latest_ticks: np.ndarray | None = None
-        self._gyro_sum = 0.0
-        self._gyro_n = 0
+        # Each frame's gyro_z is the mean rate over its own period (since the previous frame): the
+        # mean over several frames weights them by those periods (MCU time), so a frame sent late
+        # (covering 200 ms) and the ones sent right after it (covering ~0) integrate to the true angle.
+        self._gyro_integral = 0.0  # rad since the last take
+        self._gyro_time = 0.0  # s of MCU time in that integral
+        self._gyro_last: float | None = None  # newest frame's rate since the last take
         self._new = False
         self._last_rx = time.monotonic()  # link timing is wall time whatever the session clock
         self._port_error: str | None = None
+        self._crash: str | None = None  # why the reader thread died, if it did: a FAULT until restart
         self._errors: list[str] = []
         self.params: dict[int, ParamValue] = {}
         # command state
@@ -208,6 +214,16 @@ class BaseLink:
 
     # ---- reader thread -------------------------------------------------------------------------
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # a bug here must not leave a silent link blamed on the wiring
+            reason = describe_crash(f"base reader thread ({self.options.port})", exc)
+            log.exception("%s", reason)
+            with self._lock:
+                self._crash = reason
+            self.link_status()  # enter LOST now: zero the held command and send the stop
+
+    def _loop(self) -> None:
         while not self._stop.is_set():
             ser = self._ser
             if ser is None:
@@ -270,6 +286,11 @@ class BaseLink:
                     and m.mcu_us < self._last_mcu_us
                     and (self._last_mcu_us - m.mcu_us < 1 << 31)
                 )
+                period = (
+                    ((m.mcu_us - self._last_mcu_us) & 0xFFFFFFFF) * 1e-6
+                    if self._last_mcu_us is not None and not rebooted
+                    else 0.0
+                )
                 self._last_mcu_us = m.mcu_us
                 stamp = self._sync.stamp(m.mcu_us, now)
                 ticks = self._ticks.update(m.enc, rebased=rebooted)
@@ -277,8 +298,9 @@ class BaseLink:
                     self._latest = m
                     self._latest_stamp = stamp
                     self._latest_ticks = ticks
-                    self._gyro_sum += m.gyro_z
-                    self._gyro_n += 1
+                    self._gyro_integral += m.gyro_z * period
+                    self._gyro_time += period
+                    self._gyro_last = m.gyro_z
                     self._new = True
                     self._last_rx = wall
                     self._rx_bytes = 0
@@ -327,7 +349,7 @@ class BaseLink:
         now = time.monotonic()
         with self._lock:
             silent = now - self._last_rx
-            port_error = self._port_error
+            port_error = self._crash or self._port_error
         good, bad = self._decoder.good, self._decoder.bad
         with self._lock:
             if now - self._rate_ref[0][0] >= 1.0:  # two one-second buckets: the ratio covers 1-2 s
@@ -371,8 +393,8 @@ class BaseLink:
         """Latest telemetry, its stamp, cumulative ticks, mean gyro since last take, whether new."""
         with self._lock:
             m, stamp, ticks, new = self._latest, self._latest_stamp, self._latest_ticks, self._new
-            gyro = self._gyro_sum / self._gyro_n if self._gyro_n else None
-            self._gyro_sum, self._gyro_n, self._new = 0.0, 0, False
+            gyro = self._gyro_integral / self._gyro_time if self._gyro_time > 0 else self._gyro_last
+            self._gyro_integral, self._gyro_time, self._gyro_last, self._new = 0.0, 0.0, None, False
             errors, self._errors = self._errors, []
         return m, stamp, ticks, gyro, new, errors
 
@@ -429,7 +451,7 @@ class SerialDriver:
         self.profile = profile
         self.clock: Clock = clock or RealClock()
         self._estop_sent = False
-        self._base = BaseLink(opts, profile.wheel_count, self.clock)
+        self._base = BaseLink(opts, self.clock)
         self._lidar = None
         if opts.lidar_port:
             from robot.serial.rplidar import RPLidar

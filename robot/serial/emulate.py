@@ -28,7 +28,7 @@ class EmulatorPair:
         start_pose: Pose2D | None = None,
         link_dir: str | Path | None = None,
         lidar: bool = True,
-        sample_rate: float = 2000.0,
+        sample_rate: float | None = None,  # None: enough for the profile's beams (default_sample_rate)
         pump: SimPump | None = None,
     ) -> None:
         self.pump = pump or SimPump.for_world(world, profile, seed=seed, start_pose=start_pose)

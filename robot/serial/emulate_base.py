@@ -120,6 +120,9 @@ class BaseEmulator:
         self.message_log: deque[tuple[float, Message]] = deque(maxlen=8192)
         self.heartbeats = 0
         self.telemetry_sent = 0
+        self._last_telemetry: float | None = None  # monotonic time of the last telemetry frame
+        self._gyro_claimed = 0.0  # rad reported by frames that repeated the last rate, not yet measured
+        self._last_raw: np.ndarray | None = None  # encoder counts of the last telemetry frame
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         pump.subscribe(self._on_frame)
@@ -261,9 +264,25 @@ class BaseEmulator:
         with self._lock:
             s = self._sensors
             raw = s.counts - self._enc_offset
-            # a period without a new IMU sample repeats the last rate (an MCU holds its last reading)
-            gyro = s.gyro_integral / s.gyro_time if s.gyro_time > 0 else s.gyro_last
+            # The angle turned since the previous frame over that frame's MCU period, so the host's
+            # sum of rate x period is the angle the robot turned, as the encoder counts are its
+            # travel. (Over the simulator's IMU time instead, a starved simulator thread makes the two
+            # windows differ: a catch-up frame's angle, 200 ms of IMU time but 20 ms of MCU time,
+            # would be lost.) Without a new IMU sample: while the simulator stands still (counts
+            # unchanged too) nothing turned as far as the data go, and the host, seeing still wheels,
+            # takes that frame's rate as gyro bias, so 0; otherwise the last rate, as an MCU holds its
+            # last reading, taken off the next frame that has samples.
+            period = now - self._last_telemetry if self._last_telemetry is not None else 0.0
+            if s.gyro_time > 0 and period > 0:
+                gyro = (s.gyro_integral - self._gyro_claimed) / period
+                self._gyro_claimed = 0.0
+            elif self._last_raw is not None and np.array_equal(raw, self._last_raw):
+                gyro = 0.0 if period > 0 else s.gyro_last
+            else:
+                gyro = s.gyro_last
+                self._gyro_claimed += gyro * period
             s.gyro_integral, s.gyro_time = 0.0, 0.0
+            self._last_telemetry, self._last_raw = now, raw.copy()
             accel, ir_bits, battery, obstacle = s.accel, s.ir_bits, s.battery_v, s.obstacle_stop
         enc = (((raw + (1 << 31)) % (1 << 32)) - (1 << 31)).astype(np.int64).tolist()
         status = Status(0)

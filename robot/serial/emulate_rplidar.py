@@ -3,7 +3,9 @@
 Speaks Slamtec's protocol byte for byte (STOP, RESET, SCAN, FORCE_SCAN, GET_INFO, GET_HEALTH; other
 requests are ignored like the A1 does). Each simulated scan (at the profile's ``rate_hz``, 5.5-10
 Hz) becomes one rotation of ``sample_rate / rate_hz`` clockwise nodes with the start flag on the
-first, streamed at ``sample_rate`` (2000 samples/s by default, the A1's figure) in real time. The
+first, streamed at ``sample_rate`` in real time: by default the A1's 2000 samples/s, or more when
+the profile asks more beams per rotation than that gives (a 360-beam lidar at 10 Hz is an A2/A3-class
+sensor: 3600 samples/s), so any profile's lidar is emulated without empty beams. The
 motor cannot be switched through DTR on a pseudo-terminal, so it always spins while scanning.
 """
 
@@ -19,6 +21,7 @@ import numpy as np
 
 from nav.types import LaserScan
 from robot.base import SensorFrame
+from robot.profiles import LidarSpec
 from robot.serial.faults import LineFaults
 from robot.serial.pty import PtyPort
 from robot.serial.rplidar import SCAN_DESCRIPTOR, SYNC, Cmd, DeviceInfo, Health, encode_nodes
@@ -28,6 +31,13 @@ A1_INFO = DeviceInfo(
     model=0x18, firmware=(1, 29), hardware=7, serial_number="4E6A9AF2C3E19ED2A0E69EF1342E4C09"
 )
 RESET_BANNER = b"RP LIDAR System.\r\nFirmware Ver 1.29 - rtm, HW Ver 7\r\nModel: 18\r\n"
+A1_SAMPLE_RATE = 2000.0  # samples/s in standard scan mode
+
+
+def default_sample_rate(spec: LidarSpec) -> float:
+    """Samples/s that give every beam of ``spec`` a sample each rotation (the emulated angles jitter by
+    under a quarter step, so one sample a beam lands in each), and never fewer than the A1's 2000."""
+    return max(A1_SAMPLE_RATE, float(spec.beams * spec.rate_hz))
 
 
 def scan_to_nodes(
@@ -62,13 +72,13 @@ class RPLidarEmulator:
         self,
         pump: SimPump,
         port: PtyPort | None = None,
-        sample_rate: float = 2000.0,
+        sample_rate: float | None = None,
         faults: LineFaults | None = None,
         seed: int = 0,
     ) -> None:
         self.pump = pump
         self.port = port or PtyPort(name="rplidar")
-        self.sample_rate = sample_rate
+        self.sample_rate = sample_rate or default_sample_rate(pump.profile.lidar)
         self.faults = faults or LineFaults(seed=seed)
         self.health = Health(0, 0)
         self.info = A1_INFO

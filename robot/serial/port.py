@@ -41,6 +41,14 @@ def open_port(port: str, baud: int, timeout: float = 0.02) -> serial.Serial:
         raise PortUnavailableError(describe_open_error(port, exc)) from exc
 
 
+def describe_crash(thread: str, exc: BaseException) -> str:
+    """The one-line fault for a reader thread that died on an unexpected exception: the real cause,
+    so the operator is never told a misleading symptom (silence, wrong baud rate) of a dead thread."""
+    first = str(exc).splitlines()[0] if str(exc) else ""
+    cause = f"{type(exc).__name__}: {first}"
+    return f"{thread} stopped on an internal error: {cause} (see the log; restart the server)"
+
+
 @dataclass
 class Backoff:
     """Exponential reconnect delays: ``initial``, doubling up to ``maximum``; ``reset`` on success."""

@@ -176,6 +176,11 @@ class Telemetry(Message):
         return (self.enc0, self.enc1, self.enc2, self.enc3)
 
 
+ENCODER_CHANNELS = 4
+"""Encoder counters every ``Telemetry`` carries, whatever the base: a 2-wheel diff base fills the first
+two (L, R) and sends 0 in the others, so the host takes the profile's ``wheel_count`` of them."""
+
+
 @dataclass(frozen=True, slots=True)
 class ParamGet(Message):
     param_id: int

@@ -43,7 +43,7 @@ import serial
 from nav.types import LaserScan
 from robot.clock import Clock, RealClock
 from robot.profiles import LidarSpec
-from robot.serial.port import Backoff, PortUnavailableError, open_port
+from robot.serial.port import Backoff, PortUnavailableError, describe_crash, open_port
 
 log = logging.getLogger(__name__)
 
@@ -476,6 +476,15 @@ class RPLidar:
 
     # ---- thread ----------------------------------------------------------------------------------
     def _run(self) -> None:
+        try:
+            self._loop()
+        except Exception as exc:  # a bug here must not pass for a silent sensor
+            reason = describe_crash(f"lidar reader thread ({self.port})", exc)
+            log.exception("%s", reason)
+            with self._lock:
+                self.fault = reason  # nothing clears it: no scan can arrive any more
+
+    def _loop(self) -> None:
         while not self._stop.is_set():
             if self._ser is None:
                 if self._stop.wait(self._backoff.next_delay()):

@@ -19,6 +19,7 @@ from app.modes import Mode, TransitionRefused, driving_hint
 from app.notices import NoticeTap
 from app.runtime import Runtime
 from app.security import principal_of
+from app.session import TELEOP_REARM_REASON
 from app.telemetry import snapshot_dict
 from nav.types import Twist2D
 
@@ -119,6 +120,7 @@ async def teleop(ws: WebSocket) -> None:
             guard.free(client_id, "session expired")
 
     watch = asyncio.create_task(_expiry_watch(ws, p, expired))
+    told_to_rearm = False  # the re-arm refusal is said once per held command, not 10 times a second
     try:
         while True:
             message = await ws.receive()
@@ -181,6 +183,12 @@ async def teleop(ws: WebSocket) -> None:
                 await _send(ws, {"type": "error", **exc.as_dict()})
                 continue
             mode = session.modes.mode
+            armed = session.teleop_input(cmd, client_id)  # noted in any mode: a release re-arms
+            if not armed and mode in (Mode.IDLE, Mode.TELEOP, Mode.MAPPING):
+                if not told_to_rearm:
+                    await _send(ws, {"type": "error", "error": TELEOP_REARM_REASON, "mode": mode.value})
+                told_to_rearm = True
+                continue
             if mode == Mode.IDLE and not cmd.is_zero():
                 with contextlib.suppress(TransitionRefused):
                     session.request_mode(Mode.TELEOP)
@@ -196,7 +204,11 @@ async def teleop(ws: WebSocket) -> None:
                     },
                 )
                 continue
-            session.set_teleop(cmd, client_id)
+            if session.set_teleop(cmd, client_id):
+                told_to_rearm = False
+            elif not told_to_rearm:  # disarmed between the check above and here (an e-stop)
+                await _send(ws, {"type": "error", "error": TELEOP_REARM_REASON, "mode": mode.value})
+                told_to_rearm = True
     except WebSocketDisconnect:
         pass
     finally:
