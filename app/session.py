@@ -153,7 +153,9 @@ class Session:
         self.collisions = 0
         self.distance_travelled = 0.0
         self.stats = LoopStats()
-        self.fault_monitor = FaultMonitor(self.period, options.faults)
+        self.fault_monitor = FaultMonitor(
+            self.period, options.faults, expected_beams=self.profile.lidar.beams
+        )
         self._teleop = TeleopState()
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
