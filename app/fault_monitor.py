@@ -84,11 +84,10 @@ def classify_scan(
     bad = np.isnan(r) | (finite & ((r < 0.0) | (r > 2.0 * scan.range_max)))
     n_bad = int(np.count_nonzero(bad))
     frac = n_bad / r.size
-    too_close = np.isneginf(r) | (finite & (r >= 0.0) & (r < scan.range_min))
     problem = None
     if frac > garbage_fraction:
         problem = f"{frac:.0%} invalid beams (NaN, negative or beyond 2 x range_max)"
-    elif too_close.any() and bool((too_close | bad).all()):
+    elif not (r >= scan.range_min).any():  # the rest (most beams) are -inf or below range_min
         problem = "every beam closer than range_min (sensor covered)"
     if n_bad:
         r = np.where(bad, np.nan, r)
@@ -108,7 +107,7 @@ class FaultMonitor:
         o = self.options
         self._garbage_run = 0
         self._problem = ""
-        self._last_ranges: np.ndarray | None = None
+        self._last_ranges = b""  # the previous frame's ranges, raw bytes
         self._stuck_run = 0
         self._imu = _Leaky(o.imu_hold_s)
         self._slip = _Leaky(o.slip_hold_s)
@@ -136,16 +135,10 @@ class FaultMonitor:
     def _track_repeats(self, ranges: np.ndarray) -> None:
         """Count frames identical to the previous one that hold at least one finite return (an
         empty scene repeats +inf legitimately)."""
-        r = np.asarray(ranges)
-        prev = self._last_ranges
-        same = (
-            prev is not None
-            and prev.shape == r.shape
-            and bool(np.isfinite(r).any())
-            and np.array_equal(prev, r, equal_nan=True)
-        )
+        raw = np.ascontiguousarray(ranges, dtype=np.float64).tobytes()  # bit for bit, NaN included
+        same = raw == self._last_ranges and bool(np.isfinite(ranges).any())
         self._stuck_run = self._stuck_run + 1 if same else 0
-        self._last_ranges = r.copy()
+        self._last_ranges = raw
 
     def lidar_reason(self) -> str | None:
         o = self.options
