@@ -151,16 +151,21 @@ def map_after_loop(
         drive.session.close()
 
 
-def measure(world_name: str, seed: int = 0) -> GhostReport:
+def measure(world_name: str, seed: int = 0) -> tuple[GhostReport, float]:
+    """The ghost report after the world's full loop and the SLAM pose error (m) at its end: a map
+    that is off by that much places free cells in walls however its rays were cast."""
     start, loop = FULL_LOOPS[world_name]
     drive, grid = map_after_loop(world_name, start, loop, seed)
-    return ghost_report(grid, drive.world.static_occupied, drive.world.geometry, drive.start_truth)
+    truth = drive.driver.truth_pose.relative_to(drive.start_truth)
+    report = ghost_report(grid, drive.world.static_occupied, drive.world.geometry, drive.start_truth)
+    return report, drive.session.pose.distance_to(truth)
 
 
 def _figures(world_name: str) -> list[Figure]:
-    r = measure(world_name)
+    r, end_error = measure(world_name)
     w, h = r.built_size_m
     return [
+        Figure(f"{world_name}: SLAM pose error at the end of the loop", end_error, "m"),
         Figure(f"{world_name}: free cells in walls or outside", float(r.ghosts), "cells", "0", r.ghosts == 0),
         Figure(f"{world_name}: of which in walls", float(r.in_walls), "cells"),
         Figure(f"{world_name}: of which outside the outer walls", float(r.outside), "cells"),
