@@ -118,16 +118,11 @@ def clear_segments(
         c, s = math.cos(o.theta), math.sin(o.theta)
         both = both @ np.array([[c, -s], [s, c]])
     seg = np.ascontiguousarray((both / geometry.resolution).reshape(-1, 4))
-    flags = np.broadcast_to(np.asarray(include_end, dtype=np.bool_), (seg.shape[0],))
-    stops = np.broadcast_to(np.asarray(stop_at is not None and stop, dtype=np.bool_), (seg.shape[0],))
-    b = _clear(
-        costs,
-        seg,
-        np.uint8(value),
-        np.ascontiguousarray(flags),
-        np.ascontiguousarray(stops),
-        np.uint8(0 if stop_at is None else stop_at),
-    )
+    # writable copies: a read-only (broadcast) flag array is another numba signature
+    n = seg.shape[0]
+    flags = np.array(np.broadcast_to(np.asarray(include_end, dtype=np.bool_), (n,)))
+    stops = np.array(np.broadcast_to(np.asarray(stop_at is not None and stop, dtype=np.bool_), (n,)))
+    b = _clear(costs, seg, np.uint8(value), flags, stops, np.uint8(0 if stop_at is None else stop_at))
     if b[1] < 0:
         return None
     return int(b[0]), int(b[1]) + 1, int(b[2]), int(b[3]) + 1
