@@ -9,6 +9,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import pkgutil
+import re
 import sys
 
 import app.commands as commands_pkg
@@ -31,9 +32,38 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_NEGATIVE_LIST = re.compile(r"^-\.?\d[^,]*,")
+"""A value such as ``-1.5,2,0``: argparse only takes ``-1.5`` alone as a negative number; with the
+comma it reads the token as an unknown option ("expected one argument")."""
+
+
+def attach_negative_values(argv: list[str]) -> list[str]:
+    """``--start -1.5,2,0`` -> ``--start=-1.5,2,0``, the spelling argparse accepts, so users can
+    type coordinates the natural way. Only comma lists starting with a negative number are joined:
+    no option of navdeck looks like that, and plain negative numbers already parse."""
+    out: list[str] = []
+    for tok in argv:
+        prev = out[-1] if out else ""
+        if (
+            _NEGATIVE_LIST.match(tok)
+            and prev.startswith("--")
+            and "=" not in prev
+            and prev != "--"
+            and "--" not in out[:-1]
+        ):
+            out[-1] = f"{prev}={tok}"
+        else:
+            out.append(tok)
+    return out
+
+
+def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
+    """Parse a navdeck command line (``sys.argv[1:]`` by default)."""
+    return build_parser().parse_args(attach_negative_values(sys.argv[1:] if argv is None else list(argv)))
+
+
 def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except CliError as exc:

@@ -158,7 +158,9 @@ class Session:
         self.collisions = 0
         self.distance_travelled = 0.0
         self.stats = LoopStats()
-        self.fault_monitor = FaultMonitor(self.period, options.faults)
+        self.fault_monitor = FaultMonitor(
+            self.period, options.faults, expected_beams=self.profile.lidar.beams
+        )
         self._teleop = TeleopState()
         # Clients whose latest teleop input is a motion (a key held, a stick deflected), and those of
         # them disarmed by an e-stop, fault or reset: they drive again only after a zero input, so a

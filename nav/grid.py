@@ -88,6 +88,9 @@ class InsertResult:
     """How many cells crossed from > 0 to <= 0."""
     resized: bool
     """The grid was re-allocated (flat indices of earlier results are no longer valid)."""
+    miss_reach: np.ndarray | None = None
+    """Per ray without a return (in input order): the fraction of it that cleared free space, < 1
+    where it stopped at a cell already occupied (see ``insert_rays``)."""
 
 
 class LogOddsGrid:
@@ -159,11 +162,17 @@ class LogOddsGrid:
         as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
 
         Each cell is updated once: hit cells by ``l_occ``, other traversed cells by ``l_free``.
-        Duplicates are removed with a scratch mark array over the grid (O(cells), no sort)."""
+        Duplicates are removed with a scratch mark array over the grid (O(cells), no sort).
+
+        A ray without a return stops before the first cell the grid already holds as occupied or
+        that a return of this scan marks (issue 16, "no ghost free space"): it saw nothing, so it
+        cannot tell whether it passed that surface (a dropout on a wall reads +inf too), and
+        clearing past it fans free space out through the walls. A ray with a return proves the
+        space up to it free and clears through (a door opened, a person left)."""
         origins = np.asarray(origins, dtype=float).reshape(-1, 2)
         ends = np.asarray(ends, dtype=float).reshape(-1, 2)
         if ends.shape[0] == 0:
-            return InsertResult(np.zeros(0, np.int64), 0, False)
+            return InsertResult(np.zeros(0, np.int64), 0, False, np.ones(0))
         if origins.shape[0] == 1 and ends.shape[0] > 1:
             origins = np.broadcast_to(origins, ends.shape)
         hit = np.asarray(hit, dtype=bool)
@@ -171,13 +180,16 @@ class LogOddsGrid:
         self.ensure_contains(np.vstack((origins, ends)))
         h, w = self.shape
         opt = self.options
-        pts, _ = trace_rays(origins, ends, self.resolution * opt.step_fraction)
+        pts, ray = trace_rays(origins, ends, self.resolution * opt.step_fraction)
         fr, fc = self.cells(pts)
+        free_idx = fr * w + fc
         hr, hc = self.cells(ends[hit])
-        mark = np.zeros(h * w, dtype=np.int8)
-        mark[fr * w + fc] = 1
-        mark[hr * w + hc] = 2  # a hit wins over a pass-through in the same scan
+        hit_idx = hr * w + hc
         flat = self.logodds.reshape(-1)
+        mark = np.zeros(h * w, dtype=np.int8)
+        mark[hit_idx] = 2
+        free_idx, reach = self._stop_misses(free_idx, ray, ~hit, mark, flat)
+        mark[free_idx] = np.maximum(mark[free_idx], 1)  # a hit wins over a pass-through in the same scan
         touched = np.flatnonzero(mark)
         before = flat[touched] > 0.0
         delta = np.where(mark[touched] == 2, np.float32(opt.l_occ), np.float32(opt.l_free))
@@ -185,10 +197,30 @@ class LogOddsGrid:
         after = flat[touched] > 0.0
         self.seen.reshape(-1)[touched] = True
         return InsertResult(
-            touched[after & ~before], int(np.count_nonzero(before & ~after)), self.shape != old_shape
+            touched[after & ~before], int(np.count_nonzero(before & ~after)), self.shape != old_shape, reach
         )
 
-    def insert_scan(self, sensor_pose: Pose2D, points: np.ndarray, misses: np.ndarray | None = None) -> None:
+    @staticmethod
+    def _stop_misses(
+        free_idx: np.ndarray, ray: np.ndarray, miss: np.ndarray, mark: np.ndarray, flat: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Drop the samples of return-less rays from their first occupied cell on (occupied in the
+        grid or hit by this scan, ``mark == 2``). Samples come ray by ray in order along each ray.
+        Returns the kept flat indices and, per miss ray, the fraction of it kept."""
+        n_rays = miss.size
+        counts = np.bincount(ray, minlength=n_rays)
+        if not miss.any():
+            return free_idx, np.ones(0)
+        k = np.arange(ray.size) - np.repeat(np.cumsum(counts) - counts, counts)
+        blocked = miss[ray] & ((mark[free_idx] == 2) | (flat[free_idx] > 0.0))
+        first = counts.copy()
+        np.minimum.at(first, ray[blocked], k[blocked])
+        keep = k < first[ray]
+        return free_idx[keep], (first / np.maximum(counts, 1))[miss]
+
+    def insert_scan(
+        self, sensor_pose: Pose2D, points: np.ndarray, misses: np.ndarray | None = None
+    ) -> InsertResult:
         """Integrate one scan: ``points`` (N, 2) returns and optional ``misses`` (M, 2) no-return
         ray ends, both in the sensor frame whose pose in this grid's frame is ``sensor_pose``."""
         ends = sensor_pose.transform_points(points) if len(points) else np.zeros((0, 2))

@@ -121,9 +121,10 @@ def test_classify_scan_rules() -> None:
     assert not garbage and frac == pytest.approx(2 / 8)
     assert np.isnan(clean.ranges[[2, 4]]).all() and np.isposinf(clean.ranges[1])
     assert np.isneginf(clean.ranges[6]) and clean.ranges[7] == 6.5  # REP-117 too close; a bit past spec
-    assert classify_scan(scan([np.inf] * 8), 0.5)[2]  # no valid return at all
-    assert classify_scan(scan([np.nan, -1.0, 1.0]), 0.5)[2]  # mostly invalid
-    assert classify_scan(scan([]), 0.5)[2]
+    assert classify_scan(scan([np.inf] * 8), 0.5)[2] is None  # nothing within range: open space (issue 16)
+    assert "invalid beams" in classify_scan(scan([np.nan, -1.0, 1.0]), 0.5)[2]  # mostly invalid
+    assert classify_scan(scan([]), 0.5)[2] == "empty scan (0 beams)"
+    assert classify_scan(scan([1.0] * 8), 0.5, expected_beams=360)[2].startswith("wrong beam count")
 
 
 def test_encoder_slip_faults_and_refaults_until_repaired(rig) -> None:

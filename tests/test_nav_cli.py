@@ -90,3 +90,31 @@ def test_sim_nav_missing_map_exits_2(capsys: pytest.CaptureFixture, tmp_path: Pa
         capsys, "sim-nav", "--map", str(tmp_path / "nope.yaml"), "--start", "0,0,0", "--goal", "1,1,0"
     )
     assert code == 2 and "not found" in err
+
+
+def test_sim_nav_accepts_negative_coordinates_as_typed(tmp_path: Path) -> None:
+    """``--start -2,-0.5,0`` (issue 16): argparse alone reads ``-2,...`` as an option and exits
+    with "expected one argument". The apartment with its origin moved to (-5, -4) puts the usual
+    start and goal at negative coordinates; the real entry point must run it."""
+    (tmp_path / "apartment.pgm").write_bytes((APARTMENT.parent / "apartment.pgm").read_bytes())
+    text = APARTMENT.read_text().replace("origin: [0, 0, 0]", "origin: [-5, -4, 0]")
+    (tmp_path / "shifted.yaml").write_text(text)
+    r = navdeck(
+        "sim-nav", "--map", str(tmp_path / "shifted.yaml"), "--start", "-2,-0.5,0",
+        "--goal", "-2,-1.5,-1.57", "--localization", "truth", "--json",
+    )  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    out = json.loads(r.stdout)
+    assert out["reached"] is True and out["collisions"] == 0
+
+
+def test_negative_values_reach_every_pose_option() -> None:
+    from app.cli import parse_args
+
+    args = parse_args(["sim-nav", "--map", "m.yaml", "--start", "-1.5,2,0", "--goal", "-3,-0.5",
+                       "--goal=-1,2,-1.57", "--seed", "-1"])  # fmt: skip
+    assert args.start == (-1.5, 2.0, 0.0)
+    assert args.goal == [(-3.0, -0.5, 0.0), (-1.0, 2.0, -1.57)]
+    assert args.seed == -1
+    plan = parse_args(["plan", "--map", "m.yaml", "--start", "-1,-1", "--goal", "-2.5,1,3.1"])
+    assert plan.start == (-1.0, -1.0, 0.0) and plan.goal == (-2.5, 1.0, 3.1)

@@ -4,7 +4,10 @@
 Clearing walks every beam's cells with ``nav.costmap.raytrace.clear_segments`` (Amanatides & Woo
 supercover, compiled; the cells ``nav.raycast.traversed_cells`` lists), stopping before the cell
 that holds the return (Nav2's Bresenham also stops one cell short) and at
-``raytrace_max_range``; marking sets the cells of returns within
+``raytrace_max_range``. A beam without return (issue 16) clears up to and including the first
+LETHAL cell on its way, never behind it: it cannot tell a surface it missed (a dropout) from open
+space, so it must not fan free space out through walls, yet a mark a walker left in open space
+(no return behind it ever) still wears away, a cell per scan; marking sets the cells of returns within
 ``obstacle_max_range`` to LETHAL. Clearing runs before marking, so a return always survives its own
 scan, and the layer keeps its state between scans (obstacles persist until a beam passes through).
 On an axis-aligned grid (every costmap here) the whole update is one compiled pass (``_apply_scan``)
@@ -63,13 +66,14 @@ def _bounds_of(rows: np.ndarray, cols: np.ndarray) -> Bounds | None:
 @njit(cache=True, nogil=True)
 def _beam_segments(
     pts: np.ndarray, far_pts: np.ndarray, x0: float, y0: float, ranges: np.ndarray, grid: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Clearing segments in cell units (rows of x0, y0, x1, y1) and whether each was clipped at
-    ``raytrace_max_range``, for the finite returns then the finite no-return points: the numpy
-    path's arithmetic, one beam at a time."""
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Clearing segments in cell units (rows of x0, y0, x1, y1), whether each was clipped at
+    ``raytrace_max_range`` and whether it is a beam without return, for the finite returns then
+    the finite no-return points: the numpy path's arithmetic, one beam at a time."""
     n = pts.shape[0] + far_pts.shape[0]
     seg = np.empty((n, 4))
     clipped = np.empty(n, dtype=np.bool_)
+    no_return = np.empty(n, dtype=np.bool_)
     lo, hi = ranges[0], ranges[1]
     ox, oy, res = grid[0], grid[1], grid[2]
     k = 0
@@ -89,8 +93,9 @@ def _beam_segments(
         seg[k, 2] = (x0 + ux * reach - ox) / res
         seg[k, 3] = (y0 + uy * reach - oy) / res
         clipped[k] = dist > hi
+        no_return[k] = i >= pts.shape[0]
         k += 1
-    return seg[:k], clipped[:k]
+    return seg[:k], clipped[:k], no_return[:k]
 
 
 @njit(cache=True, nogil=True)
@@ -112,9 +117,9 @@ def _apply_scan(
     h, w = costs.shape
     bounds = np.array([h, -1, w, -1], dtype=np.int64)
     if clearing:
-        seg, clipped = _beam_segments(pts, far_pts, x0, y0, ranges, grid)
+        seg, clipped, no_return = _beam_segments(pts, far_pts, x0, y0, ranges, grid)
         if seg.shape[0]:
-            bounds = _clear(costs, seg, np.uint8(FREE_SPACE), clipped)
+            bounds = _clear(costs, seg, np.uint8(FREE_SPACE), clipped, no_return, np.uint8(LETHAL_OBSTACLE))
     if marking:
         ox, oy, res = grid[0], grid[1], grid[2]
         for i in range(pts.shape[0]):
@@ -217,10 +222,11 @@ class ObstacleLayer:
                 far_pts = np.asarray(no_return_points, dtype=float).reshape(-1, 2)
                 ends = np.vstack((pts, far_pts[np.isfinite(far_pts).all(axis=1)]))
             if ends.shape[0]:
+                no_return = np.arange(ends.shape[0]) >= pts.shape[0]
                 d = ends - origin
                 dist = np.hypot(d[:, 0], d[:, 1])
                 ok = dist > max(o.raytrace_min_range, 1e-9)
-                d, dist = d[ok], dist[ok]
+                d, dist, no_return = d[ok], dist[ok], no_return[ok]
                 unit = d / dist[:, None]
                 far = origin + unit * np.minimum(dist, o.raytrace_max_range)[:, None]
                 near = origin + unit * o.raytrace_min_range
@@ -228,7 +234,12 @@ class ObstacleLayer:
                 # One compiled pass for all beams: every write is FREE, so the order cannot matter.
                 clipped = dist > o.raytrace_max_range
                 if clipped.size:
-                    bounds = _union(bounds, clear_segments(self.costs, geo, near, far, FREE_SPACE, clipped))
+                    bounds = _union(
+                        bounds,
+                        clear_segments(
+                            self.costs, geo, near, far, FREE_SPACE, clipped, LETHAL_OBSTACLE, no_return
+                        ),
+                    )
         if o.marking and pts.shape[0]:
             d = pts - origin
             dist = np.hypot(d[:, 0], d[:, 1])

@@ -37,7 +37,16 @@ def _clip(x0: float, y0: float, dx: float, dy: float, w: float, h: float) -> tup
 
 
 @njit(cache=True, nogil=True)
-def _clear(costs: np.ndarray, seg: np.ndarray, value: np.uint8, include_end: np.ndarray) -> np.ndarray:
+def _clear(
+    costs: np.ndarray,
+    seg: np.ndarray,
+    value: np.uint8,
+    include_end: np.ndarray,
+    stop: np.ndarray,
+    stop_value: np.uint8,
+) -> np.ndarray:
+    """Walk and write every segment; a segment flagged in ``stop`` ends at the first cell holding
+    ``stop_value`` (written too: it clears that surface but nothing behind it)."""
     h, w = costs.shape
     bounds = np.array([h, -1, w, -1], dtype=np.int64)  # row0, row1 (inclusive here), col0, col1
     for i in range(seg.shape[0]):
@@ -60,11 +69,14 @@ def _clear(costs: np.ndarray, seg: np.ndarray, value: np.uint8, include_end: np.
         tdy = abs(1.0 / dy) if dy != 0.0 else np.inf
         while True:
             if include_end[i] or c != end_c or r != end_r:
+                was = costs[r, c]
                 costs[r, c] = value
                 bounds[0] = min(bounds[0], r)
                 bounds[1] = max(bounds[1], r)
                 bounds[2] = min(bounds[2], c)
                 bounds[3] = max(bounds[3], c)
+                if stop[i] and was == stop_value:
+                    break
             if tmx < tmy:
                 if tmx >= t1:
                     break
@@ -87,11 +99,15 @@ def clear_segments(
     ends: np.ndarray,
     value: int,
     include_end: bool | np.ndarray = False,
+    stop_at: int | None = None,
+    stop: bool | np.ndarray = True,
 ) -> tuple[int, int, int, int] | None:
     """Set every cell of ``costs`` (over ``geometry``) whose interior a world segment
     ``starts[i] -> ends[i]`` crosses to ``value``, except the cell holding the segment's end unless
-    ``include_end`` (it holds the return; a bool, or one per segment). Returns the written region
-    (row0, row1, col0, col1), half-open, or None when nothing was written."""
+    ``include_end`` (it holds the return; a bool, or one per segment). With ``stop_at``, the
+    segments flagged in ``stop`` (a bool, or one per segment) end at the first cell holding that
+    value, which is written but nothing behind it. Returns the written region (row0, row1, col0,
+    col1), half-open, or None when nothing was written."""
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 2)
     ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2)
     if starts.shape[0] == 0:
@@ -102,8 +118,11 @@ def clear_segments(
         c, s = math.cos(o.theta), math.sin(o.theta)
         both = both @ np.array([[c, -s], [s, c]])
     seg = np.ascontiguousarray((both / geometry.resolution).reshape(-1, 4))
-    flags = np.broadcast_to(np.asarray(include_end, dtype=np.bool_), (seg.shape[0],))
-    b = _clear(costs, seg, np.uint8(value), np.ascontiguousarray(flags))
+    # writable copies: a read-only (broadcast) flag array is another numba signature
+    n = seg.shape[0]
+    flags = np.array(np.broadcast_to(np.asarray(include_end, dtype=np.bool_), (n,)))
+    stops = np.array(np.broadcast_to(np.asarray(stop_at is not None and stop, dtype=np.bool_), (n,)))
+    b = _clear(costs, seg, np.uint8(value), flags, stops, np.uint8(0 if stop_at is None else stop_at))
     if b[1] < 0:
         return None
     return int(b[0]), int(b[1]) + 1, int(b[2]), int(b[3]) + 1

@@ -25,11 +25,22 @@ def _corners(pose: Pose2D, origin: np.ndarray, shape: tuple[int, int], res: floa
     return pose.transform_points(local)
 
 
+def _crop_to_seen(layer: SubmapLayer, res: float) -> SubmapLayer:
+    """The layer cut to the bounding box of its observed cells: a submap grid grows with a margin
+    of never-seen cells, and the map's extent must be the building's, not the margins'."""
+    pose, origin, lo, sn = layer
+    rows, cols = np.flatnonzero(sn.any(axis=1)), np.flatnonzero(sn.any(axis=0))
+    r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+    return pose, origin + np.array([c0, r0], dtype=float) * res, lo[r0:r1, c0:c1], sn[r0:r1, c0:c1]
+
+
 def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOddsGrid:
     """Sum the submaps' log-odds into one grid in the map frame."""
     res = options.resolution
-    out = LogOddsGrid(LogOddsOptions(**{**options.__dict__, "grow_margin": 1.0}))
-    layers = [ly for ly in layers if ly[2].size and ly[3].any()]
+    # one cell of margin: the map's extent is what was observed (a 1 m margin made every saved map
+    # 2 m wider and taller than the building)
+    out = LogOddsGrid(LogOddsOptions(**{**options.__dict__, "grow_margin": res}))
+    layers = [_crop_to_seen(ly, res) for ly in layers if ly[2].size and ly[3].any()]
     if not layers:
         return out
     allc = np.vstack([_corners(p, o, lo.shape, res) for p, o, lo, _ in layers])
@@ -59,6 +70,12 @@ def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOdd
         sub = (slice(c0[1], c1[1]), slice(c0[0], c1[0]))
         acc[sub] += np.where(ok, lo[sr, sc], 0.0)
         seen[sub] |= ok
+    # cut to the observed cells: the corners of rotated submaps span more than they observed
+    rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
+    if rows.size:
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        acc, seen = acc[r0:r1, c0:c1], seen[r0:r1, c0:c1]
+        out.origin = out.origin + np.array([c0, r0], dtype=float) * res
     out.logodds = np.clip(acc, options.l_min, options.l_max).astype(np.float32)
     out.seen = seen
     return out

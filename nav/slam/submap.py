@@ -34,9 +34,11 @@ class Submap:
 
     def insert(
         self, node: int, node_local: Pose2D, sensor: Pose2D, points: np.ndarray, misses: np.ndarray
-    ) -> None:
+    ) -> np.ndarray:
         """Insert a scan taken at front-end pose ``node_local``; ``sensor`` is the laser in base_link
-        and ``points`` / ``misses`` are in the laser frame."""
+        and ``points`` / ``misses`` are in the laser frame. Returns ``misses`` shortened to where
+        they stopped at a surface this submap holds (``LogOddsGrid.insert_rays``), so the next
+        submap, still nearly empty, does not clear past walls this one knows."""
         in_submap = node_local.relative_to(self.local_pose).compose(sensor)
         change = self.grid.insert_scan(in_submap, points, misses)
         self.nodes.append(node)
@@ -48,6 +50,9 @@ class Submap:
                 self._field = None
             else:
                 self._field.splat(change.became_occupied)
+        if change.miss_reach is None or not len(misses):
+            return misses
+        return misses * change.miss_reach[:, None]
 
     def observed(self, xy: np.ndarray) -> np.ndarray:
         """(N,) bool: the cells under the (N, 2) submap-frame points were observed (hit or passed

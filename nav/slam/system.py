@@ -54,7 +54,10 @@ class SlamOptions:
     missing_data_ray_length: float = 5.0
     """Length (m) of the free ray cast for a beam without return (Cartographer default 5), at most
     the scan's ``range_max``: a 4 m lidar's no-return beam would otherwise clear the wall it just
-    missed past its range, and mark the cells behind it observed."""
+    missed past its range, and mark the cells behind it observed. It never clears past a surface:
+    it stops at the first cell a submap already holds as occupied (the fuller active submap first),
+    and a return-less beam next to a returning one (a dropout on a wall) stops a cell short of its
+    neighbour's return (issue 16, no ghost free space)."""
     minimum_travel_distance: float = 0.1
     """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
     minimum_travel_heading: float = math.radians(5.0)
@@ -221,6 +224,18 @@ def _voxel_filter(pts: np.ndarray, size: float, max_points: int) -> np.ndarray:
     return pts
 
 
+def _dropout_reach(r: np.ndarray, hit: np.ndarray, resolution: float) -> np.ndarray:
+    """Per beam: how far a beam without return may clear when a neighbouring beam returned
+    (+inf elsewhere). Such a beam is most likely a dropout on the surface its neighbours hit, not a
+    view into open space, so it clears up to one cell short of the nearer neighbour's return; a
+    run of return-less beams (open space, a doorway) keeps ``missing_data_ray_length``."""
+    near = np.where(hit, r, np.inf)
+    left = np.concatenate(([np.inf], near[:-1]))
+    right = np.concatenate((near[1:], [np.inf]))
+    reach = np.minimum(left, right) - resolution
+    return np.where(np.isinf(r) & np.isfinite(reach), np.maximum(reach, 0.0), np.inf)
+
+
 def _close(a: Pose2D, b: Pose2D, resolution: float) -> bool:
     """Within a cell and a degree of each other."""
     return a.distance_to(b) <= resolution and abs(a.relative_to(b).theta) <= math.radians(1.0)
@@ -328,6 +343,7 @@ class GraphSlam:
         rm = np.where(r > o.max_laser_range, np.minimum(rm, o.missing_data_ray_length), rm)
         # a beam without return says nothing beyond the sensor's own range: never clear past it
         rm = np.where(np.isinf(r), min(o.missing_data_ray_length, scan.range_max), rm)
+        rm = np.minimum(rm, _dropout_reach(r, hit, o.resolution))
         pts = np.column_stack((r[hit] * np.cos(a[hit]), r[hit] * np.sin(a[hit])))
         misses = np.column_stack((rm[miss] * np.cos(a[miss]), rm[miss] * np.sin(a[miss])))
         return pts, misses
@@ -349,9 +365,9 @@ class GraphSlam:
             sm = Submap(len(self._submaps), local, o.grid_options(), o.likelihood_sigma)
             self._submaps.append(sm)
             self._submap_global.append(self._correction.compose(local).as_array())
-        for sm in self._submaps[-2:]:
+        for sm in self._submaps[-2:]:  # the older, fuller submap first: it shortens the misses
             if not sm.finished:
-                sm.insert(index, local, laser_pose, pts_laser, misses)
+                misses = sm.insert(index, local, laser_pose, pts_laser, misses)
                 node.submaps.append(sm.index)
                 if len(sm.nodes) >= 2 * o.submap_num_range_data:
                     sm.finished = True

@@ -1,0 +1,140 @@
+"""No ghost free space (issue 16): a beam without return never clears past a surface the map holds,
+in SLAM submaps and in the costmap's obstacle layer; the simulator's lidar never sees through a
+wall; after a teleop loop of the apartment the map holds no free cell in a wall or outside the
+building and is the building's size."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from bench.ghost import ghost_report, map_after_loop
+from bench.mapping import APARTMENT_LOOP, APARTMENT_START
+from maps.stock import stock_world_path
+from nav.costmap.obstacle_layer import ObstacleLayer, ObstacleLayerOptions
+from nav.grid import LogOddsGrid, LogOddsOptions
+from nav.raycast import traversed_cells
+from nav.slam.system import GraphSlam, SlamOptions
+from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, GridGeometry, LaserScan, Pose2D
+from robot.sim import World
+
+
+def test_no_return_ray_stops_at_the_first_occupied_cell() -> None:
+    g = LogOddsGrid(LogOddsOptions(resolution=0.1, grow_margin=1.0))
+    wall = np.column_stack((np.full(21, 2.05), np.linspace(-1.0, 1.0, 21)))
+    g.insert_scan(Pose2D(0.05, 0.05, 0.0), wall)
+    change = g.insert_scan(Pose2D(0.05, 0.05, 0.0), np.zeros((0, 2)), misses=np.array([[5.0, 0.0]]))
+    occ = g.to_occupancy_grid()
+    rows, cols = occ.geometry.world_to_cell(
+        np.array([[1.55, 0.05], [2.05, 0.05], [2.55, 0.05], [4.55, 0.05]])
+    )
+    before, at, behind, far = occ.data[rows, cols]
+    assert before < 50 and at > 50  # cleared up to the wall, the wall kept
+    assert behind == far == -1  # nothing behind the wall observed
+    assert change.miss_reach is not None and change.miss_reach[0] == pytest.approx(0.4, abs=0.01)
+
+
+def test_a_return_still_clears_through_an_old_obstacle() -> None:
+    opt = LogOddsOptions(resolution=0.1, grow_margin=1.0)
+    g = LogOddsGrid(opt)
+    g.insert_scan(Pose2D(0.05, 0.05, 0.0), np.array([[1.0, 0.0]]))  # a person stood there
+    g.insert_scan(Pose2D(0.05, 0.05, 0.0), np.array([[3.0, 0.0]]))  # now the wall behind is seen
+    r, c = g.cells(np.array([[1.05, 0.05], [2.05, 0.05]]))
+    assert g.logodds[r[0], c[0]] == pytest.approx(opt.l_occ + opt.l_free, abs=1e-6)
+    assert g.logodds[r[1], c[1]] == pytest.approx(opt.l_free, abs=1e-6)
+
+
+def ring_scan(radius: float, dropouts: list[int], beams: int = 360) -> LaserScan:
+    r = np.full(beams, radius)
+    r[dropouts] = np.inf
+    return LaserScan(0.0, -math.pi, 2 * math.pi / beams, r, 0.15, 6.0)
+
+
+def test_dropout_in_a_round_room_clears_nothing_behind_the_wall() -> None:
+    """The first scan of a session has nothing mapped yet: the dropouts' neighbours vouch for the
+    wall, so a dropout may only clear in front of it."""
+    slam = GraphSlam(SlamOptions())
+    slam.add_scan(ring_scan(2.0, [10, 100, 200, 201]), Pose2D())
+    grid = slam.map()
+    rows, cols = np.nonzero(grid.data >= 0)
+    centres = grid.geometry.cell_to_world(rows, cols)
+    assert np.hypot(centres[:, 0], centres[:, 1]).max() < 2.0 + 2 * grid.geometry.resolution
+    free = grid.data[rows, cols] < 50  # one scan: passed-through cells read 40
+    assert np.hypot(centres[free, 0], centres[free, 1]).max() < 2.0
+
+
+def test_new_submap_does_not_clear_past_walls_the_older_one_holds() -> None:
+    """A run of return-less beams (no neighbour returns) at the start of a new submap: the older
+    submap holds the wall, so the new one stops there too."""
+    opts = SlamOptions(submap_num_range_data=3, minimum_travel_distance=0.0, minimum_time_interval=0.0)
+    slam = GraphSlam(opts)
+    for k in range(7):  # submaps 0, 1 (from node 3) and 2 (from node 6)
+        slam.add_scan(replace_stamp(ring_scan(2.0, []), k), Pose2D(0.0, 0.0, 0.01 * k))
+    slam.add_scan(replace_stamp(ring_scan(2.0, list(range(80, 100))), 8), Pose2D(0.0, 0.0, 0.08))
+    grid = slam.map()
+    rows, cols = np.nonzero(grid.data >= 0)
+    centres = grid.geometry.cell_to_world(rows, cols)
+    assert np.hypot(centres[:, 0], centres[:, 1]).max() < 2.0 + 2 * grid.geometry.resolution
+
+
+def replace_stamp(scan: LaserScan, stamp: float) -> LaserScan:
+    return LaserScan(stamp, scan.angle_min, scan.angle_increment, scan.ranges, scan.range_min, scan.range_max)
+
+
+@pytest.mark.parametrize("rotated", [False, True])
+def test_costmap_no_return_beam_clears_the_first_obstacle_but_nothing_behind(rotated: bool) -> None:
+    theta = 1e-9 if rotated else 0.0  # any rotation takes the numpy path
+    geo = GridGeometry(0.05, 100, 40, Pose2D(0.0, 0.0, theta))
+    layer = ObstacleLayer(geo, ObstacleLayerOptions(raytrace_max_range=4.0), track_unknown_space=True)
+    origin = np.array([0.52, 1.02])
+
+    def cell(x: float) -> tuple[int, int]:
+        r, c = geo.world_to_cell(np.array([[x, 1.02]]))
+        return int(r[0]), int(c[0])
+
+    def cost(x: float) -> int:
+        return int(layer.costs[cell(x)])
+
+    layer.costs[cell(1.52)] = layer.costs[cell(2.52)] = LETHAL_OBSTACLE  # two marks on one line
+    layer.update(np.zeros((0, 2)), origin, np.array([[4.52, 1.02]]))  # a dropout along it
+
+    assert cost(1.02) == 0 and cost(1.52) == 0  # in front and the first mark: cleared
+    assert cost(2.02) == NO_INFORMATION and cost(2.52) == LETHAL_OBSTACLE  # behind it: untouched
+    assert cost(3.52) == NO_INFORMATION
+
+
+@pytest.mark.parametrize("name", ["apartment", "office", "greenhouse"])
+def test_simulated_lidar_never_sees_through_a_wall(name: str) -> None:
+    """Rays from random free points of each stock world, at every heading: no cell the ray crosses
+    before its return is occupied, and the return lies on an occupied cell."""
+    world = World.from_yaml(stock_world_path(name))
+    geo = world.geometry
+    rng = np.random.default_rng(16)
+    free = np.argwhere(world.clearance_map > 0.2)
+    pick = free[rng.choice(len(free), 40, replace=False)]
+    origins = geo.cell_to_world(pick[:, 0], pick[:, 1]) + rng.uniform(-0.02, 0.02, (40, 2))
+    angles = rng.uniform(-math.pi, math.pi, 720)
+    ranges = world.raycaster.cast(origins, angles, 12.0)
+    org = np.repeat(origins, len(angles), axis=0)
+    ang = np.tile(angles, len(origins))
+    r = ranges.ravel()
+    hit = np.isfinite(r)
+    unit = np.column_stack((np.cos(ang), np.sin(ang)))
+    before = org + unit * np.where(hit, r - 1e-6, 12.0)[:, None]
+    rows, cols, _ = traversed_cells(geo, org, before, include_end=True)
+    assert not world.static_occupied[rows, cols].any()
+    inside = org[hit] + unit[hit] * (r[hit] + 1e-6)[:, None]
+    hr, hc = geo.world_to_cell(inside)
+    assert world.static_occupied[hr, hc].all()
+
+
+def test_apartment_loop_map_has_no_ghost_free_space() -> None:
+    """The CI-sized loop (around the living-room table, ~55 s simulated on a virtual clock)."""
+    drive, grid = map_after_loop("apartment", APARTMENT_START, APARTMENT_LOOP)
+    r = ghost_report(grid, drive.world.static_occupied, drive.world.geometry, drive.start_truth)
+    assert r.outside == 0, r
+    assert r.deeper_than_half_cell == 0, r
+    assert r.extent_error_m <= 1.0, r
+    assert r.free_cells > 10_000  # the living room, kitchen and bedroom floor are there
