@@ -29,6 +29,7 @@ from nav.control import (
 )
 from nav.control.critics import Oscillation
 from nav.control.footprint import CostWindow, FootprintModel
+from nav.control.footprint import _inside_polygon as inside_polygon
 from nav.control.geometry import polyline_distance, project_onto_polyline, project_poses
 from nav.control.trajectory import sample_twists, simulate_arcs, time_steps, window_1d
 from nav.costmap.footprint import circle_footprint
@@ -658,3 +659,56 @@ def test_skid_base_still_backs_out_of_a_dead_end() -> None:
     path = straight(4.3, 3.0, 1.5, 3.0)
     back_s, _ = _reversing_time(opts, occ, Pose2D(4.3, 3.0, 0.0), path, 30.0)
     assert back_s > 1.0
+
+
+def _reference_depth(crit, ctx) -> np.ndarray:
+    """The escape rule's depth evaluated for every pose against every lethal cell in reach (the
+    original all-pairs form) to check the pruned KD-tree form against."""
+    w, poses = ctx.window, ctx.trajectories.poses
+    rr, cc = np.nonzero(w.costs >= 254)
+    cells = w.geometry.cell_to_world(rr, cc)
+    poly = crit._polygon()
+    flat = poses.reshape(-1, 3)
+    dx = cells[None, :, 0] - flat[:, 0:1]
+    dy = cells[None, :, 1] - flat[:, 1:2]
+    c, s = np.cos(flat[:, 2:3]), np.sin(flat[:, 2:3])
+    pts = np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1).reshape(-1, 2)
+    a, b = poly, np.roll(poly, -1, axis=0)
+    ab = b - a
+    t = np.clip(((pts[:, None, :] - a) * ab).sum(-1) / (ab * ab).sum(-1), 0.0, 1.0)
+    edge = np.hypot(*(a + t[..., None] * ab - pts[:, None, :]).transpose(2, 0, 1)).min(axis=1)
+    inside = inside_polygon(pts, poly)
+    signed = np.where(inside, edge, -edge).reshape(flat.shape[0], -1).max(axis=1)
+    return signed.reshape(poses.shape[:2])
+
+
+@pytest.mark.parametrize("opts", [SKID, OMNI], ids=["skid", "omni"])
+def test_escape_depth_keeps_the_same_trajectories_as_all_pairs_in_dense_clutter(opts) -> None:
+    """Greenhouse-like clutter (posts every 0.3 m) around a robot touching one: the pruned depth
+    (pose-cell pairs within the circumscribed radius + a cell) makes the same escape decisions as
+    evaluating every pose against every lethal cell, which for an omni robot there grew to GiBs."""
+    occ = room()
+    for x in np.arange(1.0, 5.0, 0.3):
+        for y in np.arange(1.0, 5.0, 0.3):
+            occ[round(y / RES), round(x / RES)] = True
+    cm = inflate(occ, inscribed=0.1)
+    post = np.array([(round(3.1 / RES) + 0.5) * RES, (round(2.8 / RES) + 0.5) * RES])
+    front = 0.12 if opts.footprint else opts.robot_radius
+    pose = Pose2D(post[0] - front + 0.015, post[1], 0.0)  # the post's centre 1.5 cm inside the front
+    ctl = DwaController(opts)
+    ctl.set_path(straight(pose.x, pose.y, 4.8, pose.y))
+    captured = {}
+    crit = next(c for c in ctl.critics if c.name == "ObstacleFootprint")
+    original = crit._depth
+
+    def spy(ctx):
+        captured["ctx"] = ctx
+        return original(ctx)
+
+    crit._depth = spy
+    _cmd, dbg = ctl.compute(pose, Twist2D(), cm)
+    assert crit.escaping and dbg.legal.any() and not dbg.legal.all()
+    ctx = captured["ctx"]
+    pruned, full = original(ctx), _reference_depth(crit, ctx)
+    assert np.array_equal(pruned[:, 1:] > pruned[:, :1] + 1e-9, full[:, 1:] > full[:, :1] + 1e-9)
+    assert np.allclose(pruned[:, 0], full[:, 0])  # the start's depth is exact
