@@ -11,6 +11,7 @@ import importlib
 import json
 import math
 import pkgutil
+import re
 import subprocess
 import sys
 import time
@@ -44,7 +45,6 @@ ROOT = Path(__file__).resolve().parent.parent
 for _package in ("app", "nav", "robot"):
     for _module in pkgutil.walk_packages(importlib.import_module(_package).__path__, f"{_package}."):
         importlib.import_module(_module.name)
-SLACK = 0.4  # s of scheduling slack on timing bounds: these tests run on wall time on loaded machines
 
 
 @pytest.fixture(scope="module", autouse=True)
@@ -135,11 +135,12 @@ def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
 
 
 def patient(pair: EmulatorPair) -> str:
-    """For tests about something else than the watchdogs: a 1 s firmware command watchdog and a 1 s
-    host link watchdog, so threads starved for 300 ms on a loaded CI machine fault nothing (a pulled
-    port still faults at once). The robot URL to serve."""
+    """For tests about something else than the watchdogs: a 1 s firmware command watchdog, a 1 s host
+    link watchdog and a 3 s lidar silence limit, so threads starved for 300 ms (or the emulated lidar
+    for 1.1 s, seen under CI load) on a loaded machine fault nothing (a pulled port still faults at
+    once). The robot URL to serve."""
     pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
-    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0"
+    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0&lidar_timeout=3.0"
 
 
 @pytest.fixture
@@ -208,12 +209,11 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(start) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
         pair.base.unplug()
-        t0 = time.monotonic()
         assert wait_for(lambda: session.modes.mode.value == "fault", timeout=3.0, period=0.005)
-        elapsed = time.monotonic() - t0
-        # the port error, not the (1 s here) watchdog: one 50 ms control period plus slack
-        assert elapsed < session.period + SLACK, elapsed
+        # the port error, not the (1 s here) watchdog's silence, named by the fault (a wall-clock bound
+        # on how soon it came failed on a loaded machine)
         assert session.fault is not None and pair.base_path in session.fault
+        assert "no telemetry" not in session.fault, session.fault
         assert session.link_state.value == "lost"
         assert wait_for(lambda: session.last_command.is_zero(), timeout=1.0)
         state = httpx.get(f"{server.url}/api/robot", timeout=10).json()
@@ -247,12 +247,13 @@ def test_silent_base_faults_after_the_link_timeout(pair: EmulatorPair, server: E
         hello(ws)
         drive(ws, 0.4, vx=0.15)
         pair.base.faults.stall = True
-        t0 = time.monotonic()
         assert wait_for(lambda: session.modes.mode.value == "fault", timeout=3.0, period=0.005)
-        elapsed = time.monotonic() - t0
-        # not before the timeout (less the reader's lag behind the last frame), not long after it
-        assert 0.3 - SLACK / 2 < elapsed < 0.3 + session.period + SLACK, elapsed
-        assert "no telemetry" in (session.fault or "")
+        # not before the timeout: the silence the driver measured when it gave up (wall-clock bounds
+        # on how soon after it the fault shows failed on a loaded CI machine; the fault within one
+        # control period is the session tests' check on the virtual clock)
+        found = re.search(r"no telemetry from \S+ for (\d+) ms", session.fault or "")
+        assert found is not None, session.fault
+        assert int(found.group(1)) >= 300, session.fault
         # the base still listens: the host's stop reached it
         assert wait_for(lambda: pair.base.last_command is not None and pair.base.last_command.vx == 0.0, 1.0)
         pair.base.faults.stall = False

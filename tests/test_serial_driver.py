@@ -133,6 +133,7 @@ def test_parse_url() -> None:
     assert o == SerialOptions(port="/dev/ttyUSB0", lidar_port="/dev/ttyUSB1", baud=230400)
     assert parse_serial_url("serial://ttyACM0").port == "/dev/ttyACM0"
     assert parse_serial_url("serial:///dev/ttyUSB0?link_timeout=0.5").link_timeout == 0.5
+    assert parse_serial_url("serial:///dev/ttyUSB0?lidar_timeout=3").lidar_timeout == 3.0
     for bad in (
         "tcp://x",
         "serial://",

@@ -71,6 +71,8 @@ class SerialOptions:
     """RPLidar A1 baud rate (fixed 115200 on the A1)."""
     link_timeout: float = 0.3
     """No telemetry for this long -> LinkStatus LOST."""
+    lidar_timeout: float = 1.0
+    """No lidar sample for this long -> the lidar driver restarts the scan and reports it (a fault)."""
     keepalive_period: float = 0.05
     """How often the reader thread resends the held velocity (or a heartbeat when idle)."""
     command_hold: float = 0.5
@@ -86,8 +88,9 @@ class SerialOptions:
 def parse_serial_url(url: str) -> SerialOptions:
     """``serial:///dev/ttyUSB0?lidar=/dev/ttyUSB1&baud=115200`` -> ``SerialOptions``.
 
-    Query keys: ``lidar``, ``baud``, ``lidar_baud``, ``link_timeout``, ``keepalive_period``,
-    ``command_hold``. Unknown keys are an error, so a typo does not silently fall back to a default.
+    Query keys: ``lidar``, ``baud``, ``lidar_baud``, ``link_timeout``, ``lidar_timeout``,
+    ``keepalive_period``, ``command_hold``. Unknown keys are an error, so a typo does not silently
+    fall back to a default.
     """
     parsed = urlparse(url)
     if parsed.scheme != "serial":
@@ -104,6 +107,7 @@ def parse_serial_url(url: str) -> SerialOptions:
         "baud": ("baud", int),
         "lidar_baud": ("lidar_baud", int),
         "link_timeout": ("link_timeout", float),
+        "lidar_timeout": ("lidar_timeout", float),
         "keepalive_period": ("keepalive_period", float),
         "command_hold": ("command_hold", float),
     }
@@ -454,10 +458,16 @@ class SerialDriver:
         self._base = BaseLink(opts, self.clock)
         self._lidar = None
         if opts.lidar_port:
-            from robot.serial.rplidar import RPLidar
+            from robot.serial.rplidar import RPLidar, RPLidarOptions
 
             try:
-                self._lidar = RPLidar(opts.lidar_port, profile.lidar, clock=self.clock, baud=opts.lidar_baud)
+                self._lidar = RPLidar(
+                    opts.lidar_port,
+                    profile.lidar,
+                    clock=self.clock,
+                    baud=opts.lidar_baud,
+                    options=RPLidarOptions(silent_timeout=opts.lidar_timeout),
+                )
             except BaseException:
                 self._base.close()
                 raise
