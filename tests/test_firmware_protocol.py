@@ -10,6 +10,7 @@ from __future__ import annotations
 import subprocess
 from collections.abc import Iterator
 from dataclasses import astuple
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -184,3 +185,10 @@ def test_streaming_receiver_counts_like_the_python_decoder(c: VectorProgram) -> 
         expect = (want + " " if want else "") + f"good={py.good} drops={counts}"
         assert c.ask(f"stream {bytes(stream).hex()}") == expect, trial
     assert MessageDecoder().feed(encode(ParamSave(), 0)) == [ParamSave()]
+
+
+def test_param_save_example_in_the_spec_is_the_encoder_output() -> None:
+    spec = (Path(__file__).resolve().parent.parent / "docs" / "serial-protocol.md").read_text()
+    wire = encode(ParamSave(), 7)
+    assert f"wire `{wire.hex(' ')}`" in spec
+    assert f"payload `{cobs_decode(wire[:-1]).hex(' ')}`" in spec
