@@ -363,3 +363,30 @@ def test_param_set_is_volatile_until_param_save(tmp_path: Path, kind: str) -> No
     finally:
         link.close()
         base.close()
+
+
+def test_bad_frames_from_the_host_are_reported_only_above_five_percent(raw: RawLink) -> None:
+    from robot.serial.protocol import Heartbeat
+
+    def bad_frame_errors(since: int) -> list[ErrorReport]:
+        raw.collect(1.2)  # the base checks once a second
+        return [m for m in raw.log[since:] if isinstance(m, ErrorReport) and m.code == ErrorCode.BAD_FRAME]
+
+    raw.collect(1.2)  # past the first report window
+    start = len(raw.log)
+    # one corrupted frame among ~60 good ones: a glitch, no ERROR
+    for k in range(60):
+        frame = bytearray(raw.seq.encode(Heartbeat(k)))
+        if k == 30:
+            frame[3] ^= 0x40
+        raw.ser.write(bytes(frame))  # one burst: any report window holds >= 30 of them
+    assert not bad_frame_errors(start)
+    # a line that garbles a third of the frames: reported, with the count
+    start = len(raw.log)
+    for k in range(30):
+        frame = bytearray(raw.seq.encode(Heartbeat(k)))
+        if k % 3 == 0:
+            frame[3] ^= 0x40
+        raw.ser.write(bytes(frame))
+    errors = bad_frame_errors(start)
+    assert errors and sum(e.detail for e in errors) == 10, errors

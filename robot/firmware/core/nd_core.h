@@ -41,7 +41,7 @@ typedef struct {
 
     uint32_t next_control_us, next_imu_us, next_telemetry_us, last_bad_report_us;
     uint32_t last_control_us;
-    uint32_t bad_reported; /* dropped frames already reported in an ERROR BAD_FRAME */
+    uint32_t bad_reported, good_reported; /* receiver counts at the last BAD_FRAME check */
     uint32_t telemetry_sent;
     bool reboot_requested; /* RESET mode 2 on a host whose hal_reboot returns */
 } nd_core_t;

@@ -255,7 +255,10 @@ static void imu_init(void) {
 
 int hal_imu_read(float *gyro_z, float accel[3]) {
     uint8_t b[14];
+    static uint32_t last_try_ms;
     if (!g_imu_ready) {
+        if (g_ms - last_try_ms < 1000u) return 3; /* retry the bus once a second, not every 5 ms */
+        last_try_ms = g_ms;
         imu_init();
         if (!g_imu_ready) return 3;
     }
