@@ -11,6 +11,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Iterator
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -390,3 +391,23 @@ def test_bad_frames_from_the_host_are_reported_only_above_five_percent(raw: RawL
         raw.ser.write(bytes(frame))
     errors = bad_frame_errors(start)
     assert errors and sum(e.detail for e in errors) == 10, errors
+
+
+def test_diff_base_drives_two_wheels(tmp_path: Path) -> None:
+    """A two-wheel differential base (L, R): a turn in place runs the wheels opposite, the gyro
+    reads the commanded rate, the unused encoder slots stay 0."""
+    diff = replace(SKID, kinematics="diff")
+    assert diff.wheel_count == 2
+    with HostFirmwareBase(diff, link_dir=tmp_path / "dev") as fw:
+        link = RawLink(fw.path)
+        try:
+            for _ in range(30):
+                link.send(VelocityCommand(0.0, 0.3, 1.0))  # vy is ignored by a diff base
+                link.collect(0.05)
+            t = link.telemetry()
+        finally:
+            link.close()
+    # in place: -/+ wz * track / 2 per side
+    assert t.enc0 < -300 and t.enc1 > 300 and abs(t.enc0 + t.enc1) < 0.05 * t.enc1, t
+    assert t.enc2 == 0 and t.enc3 == 0
+    assert t.gyro_z == pytest.approx(1.0, abs=0.08)
