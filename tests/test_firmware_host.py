@@ -135,6 +135,12 @@ class RawLink:
         self.ser.close()
 
 
+def relax_watchdog(link: RawLink) -> None:
+    """CMD_TIMEOUT 1 s: a test thread starved for 200 ms on a loaded machine must not trip the
+    firmware watchdog in tests about something else (the watchdog has tests of its own)."""
+    assert link.param(ParamSet(ParamId.CMD_TIMEOUT, 1.0)).status == ParamStatus.OK
+
+
 @pytest.fixture
 def raw(fw: HostFirmwareBase) -> Iterator[RawLink]:
     link = RawLink(fw.path)
@@ -159,8 +165,7 @@ def test_drives_straight_at_the_commanded_speed(fw: HostFirmwareBase, driver: Se
     assert np.all(np.abs(counts - counts.mean()) < 0.05 * counts.mean())  # straight: wheels agree
     # the wheel speed PID closes the gap between the feed-forward and the (slower) motors
     t0 = driver.telemetry
-    time.sleep(0.5)
-    drive(driver, Twist2D(0.2, 0.0, 0.0), 0.5)
+    drive(driver, Twist2D(0.2, 0.0, 0.0), 1.0)
     t1 = driver.telemetry
     assert t0 is not None and t1 is not None
     assert wheel_speed(t0, t1, SKID) == pytest.approx(np.full(4, 0.2), abs=0.02)
@@ -201,7 +206,7 @@ def test_firmware_watchdog_stops_motors(raw: RawLink) -> None:
     assert stopped.enc0 > 20  # it did move before the watchdog fired
     time.sleep(0.3)
     later = raw.telemetry()
-    assert later.enc == stopped.enc or np.all(np.abs(np.subtract(later.enc, stopped.enc)) <= 30)
+    assert np.all(np.abs(np.subtract(later.enc, stopped.enc)) <= 5), (stopped.enc, later.enc)  # braked
     assert later.status & Status.WATCHDOG_STOP
     assert later.mcu_us - t_sent > 200_000
     # a fresh command clears the stop and drives again
@@ -223,6 +228,7 @@ def test_heartbeats_alone_do_not_hold_a_command(raw: RawLink) -> None:
 
 
 def test_estop_latches_and_reset_moves_nothing_until_a_fresh_command(raw: RawLink) -> None:
+    relax_watchdog(raw)
     for _ in range(8):
         raw.send(VelocityCommand(0.2, 0.0, 0.0))
         raw.collect(0.05)
@@ -273,9 +279,11 @@ def test_unplug_lost_then_replug_recovers(fw: HostFirmwareBase) -> None:
 
 
 def test_imu_fault_is_reported_and_clears(fw: HostFirmwareBase, driver: SerialDriver) -> None:
+    assert wait_for(lambda: driver.read().link.state is LinkState.OK and driver.telemetry is not None, 3.0)
+    assert driver.read().fault is None
     fw.toggle_imu_fault()
-    assert wait_for(lambda: (driver.read().fault or "").find("IMU") >= 0, timeout=2.0)
-    assert driver.telemetry is not None and driver.telemetry.status & Status.IMU_FAULT
+    assert wait_for(lambda: "IMU" in (driver.read().fault or ""), timeout=2.0)
+    assert wait_for(lambda: bool(driver.telemetry and driver.telemetry.status & Status.IMU_FAULT), 2.0)
     fw.toggle_imu_fault()
     assert wait_for(lambda: driver.read().fault is None, timeout=2.0)
 
@@ -286,6 +294,7 @@ def test_parameters_are_checked_and_take_effect(raw: RawLink) -> None:
     assert raw.param(ParamSet(ParamId.CMD_TIMEOUT, float("nan"))).status == ParamStatus.OUT_OF_RANGE
     assert raw.param(ParamSet(200, 1.0)).status == ParamStatus.UNKNOWN_ID
     assert raw.param(ParamGet(0)).status == ParamStatus.UNKNOWN_ID
+    relax_watchdog(raw)
     # a 10 % too large wheel radius makes the firmware drive 10 % too slow (what calibrate measures)
     wrong = raw.param(ParamSet(ParamId.WHEEL_RADIUS, SKID.wheel_radius * 1.1))
     assert wrong.status == ParamStatus.OK
@@ -401,6 +410,7 @@ def test_diff_base_drives_two_wheels(tmp_path: Path) -> None:
     with HostFirmwareBase(diff, link_dir=tmp_path / "dev") as fw:
         link = RawLink(fw.path)
         try:
+            relax_watchdog(link)
             for _ in range(30):
                 link.send(VelocityCommand(0.0, 0.3, 1.0))  # vy is ignored by a diff base
                 link.collect(0.05)

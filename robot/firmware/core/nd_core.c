@@ -27,6 +27,7 @@ static void send_param(nd_core_t *c, uint8_t id, float value, uint8_t status) {
 static void stop_motors(nd_core_t *c, bool brake) {
     memset(&c->cmd, 0, sizeof c->cmd);
     c->moving = false;
+    c->braking = brake;
     nd_pid_reset(&c->pid);
     if (brake) {
         hal_motor_brake_all();
@@ -53,6 +54,7 @@ static void on_velocity(nd_core_t *c, const nd_velocity_t *v, uint32_t now) {
     c->last_cmd_us = now;
     c->watchdog_stop = false;
     c->moving = c->cmd.vx != 0.0f || c->cmd.vy != 0.0f || c->cmd.wz != 0.0f;
+    if (c->moving) c->braking = false;
 }
 
 static void on_reset(nd_core_t *c, uint8_t mode) {
@@ -143,7 +145,7 @@ static void link_rx(nd_core_t *c) {
 static void watchdog(nd_core_t *c, uint32_t now) {
     const uint32_t timeout_us = (uint32_t)(c->params.value[ND_PARAM_CMD_TIMEOUT] * 1e6f);
     if (c->moving && due(now, c->last_cmd_us + timeout_us)) {
-        stop_motors(c, false);
+        stop_motors(c, true); /* the host is gone: stop now, not coast */
         c->watchdog_stop = true;
         send_error(c, ND_ERR_WATCHDOG, ND_SEV_WARNING, (now - c->last_cmd_us) / 1000u);
     }
@@ -160,7 +162,7 @@ static void control(nd_core_t *c, uint32_t now) {
     c->obstacle_stop = enabled && ir != 0 && (c->obstacle_stop || c->cmd.vx > 0.0f);
     const float vx = c->obstacle_stop && c->cmd.vx > 0.0f ? 0.0f : c->cmd.vx;
 
-    if (c->estop) return; /* motors stay braked */
+    if (c->estop || c->braking) return; /* motors stay braked */
     float target[ND_MAX_WHEELS];
     nd_inverse_kinematics(&c->board, &c->params, vx, c->cmd.vy, c->cmd.wz, target);
     nd_pid_step(&c->pid, &c->board, &c->params, target, c->enc.speed, dt);

@@ -30,6 +30,7 @@ typedef struct {
     bool moving;           /* the held command is non-zero */
     bool estop;            /* ESTOP_LATCHED */
     bool watchdog_stop;    /* WATCHDOG_STOP */
+    bool braking;          /* e-stop or watchdog: motors held braked until a fresh command or RESET */
     bool obstacle_stop;    /* OBSTACLE_STOP */
     bool motor_fault;
     bool imu_fault;
