@@ -22,6 +22,7 @@ from nav.types import Twist2D
 from robot.base import LinkState, SensorFrame
 from robot.firmware.build import CompilerMissingError, build
 from robot.firmware.host_base import HostFirmwareBase
+from robot.firmware.save_params import main as save_params_main
 from robot.profiles import RobotProfile, load_profile
 from robot.serial.driver import SerialDriver, SerialOptions, wait_for
 from robot.serial.emulate import EmulatorPair
@@ -45,6 +46,7 @@ from robot.serial.protocol import (
     Telemetry,
     VelocityCommand,
 )
+from robot.serial.pty import PtyPort
 
 SKID = load_profile("skid4")
 OMNI = load_profile("omni4")
@@ -421,3 +423,35 @@ def test_diff_base_drives_two_wheels(tmp_path: Path) -> None:
     assert t.enc0 < -300 and t.enc1 > 300 and abs(t.enc0 + t.enc1) < 0.05 * t.enc1, t
     assert t.enc2 == 0 and t.enc3 == 0
     assert t.gyro_z == pytest.approx(1.0, abs=0.08)
+
+
+def test_save_params_tool_persists_what_param_set_changed(
+    fw: HostFirmwareBase, capsys: pytest.CaptureFixture[str]
+) -> None:
+    link = RawLink(fw.path)
+    try:
+        assert link.param(ParamSet(ParamId.TRACK_WIDTH, 0.23)).status == ParamStatus.OK
+    finally:
+        link.close()
+    assert save_params_main([fw.path]) == 0
+    assert "saved 12 parameters" in capsys.readouterr().out
+    link = RawLink(fw.path)
+    try:
+        link.send(Reset(ResetMode.REBOOT))
+        link.collect(0.2)
+        assert link.param(ParamGet(ParamId.TRACK_WIDTH)).value == pytest.approx(0.23)
+    finally:
+        link.close()
+
+
+def test_save_params_tool_says_when_the_base_does_not_answer(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    silent = PtyPort(tmp_path / "ttyUSB0")  # a device that never answers (an old firmware, or not the base)
+    try:
+        assert save_params_main([silent.path, "--timeout", "0.3"]) == 1
+    finally:
+        silent.close()
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and "no answer to PARAM_SAVE" in err and silent.path in err, err
+    assert save_params_main([str(tmp_path / "missing")]) == 2
