@@ -455,3 +455,30 @@ def test_save_params_tool_says_when_the_base_does_not_answer(
     err = capsys.readouterr().err.strip()
     assert "\n" not in err and "no answer to PARAM_SAVE" in err and silent.path in err, err
     assert save_params_main([str(tmp_path / "missing")]) == 2
+
+
+def test_ir_obstacle_holds_forward_motion_off_reverse_allowed(tmp_path: Path) -> None:
+    with HostFirmwareBase(SKID, link_dir=tmp_path / "dev", extra_args=("--ir-bits", "1")) as fw:
+        link = RawLink(fw.path)
+        try:
+            relax_watchdog(link)
+            start = link.telemetry()
+            for _ in range(10):
+                link.send(VelocityCommand(0.2, 0.0, 0.0))
+                link.collect(0.05)
+            blocked = link.telemetry()
+            assert blocked.status & Status.OBSTACLE_STOP and blocked.ir_bits == 1
+            assert blocked.enc == start.enc  # forward is held off
+            for _ in range(10):
+                link.send(VelocityCommand(-0.1, 0.0, 0.0))
+                link.collect(0.05)
+            assert np.all(np.array(link.telemetry().enc) < -100)  # backing away is allowed
+            assert link.param(ParamSet(ParamId.OBSTACLE_STOP_ENABLE, 0.0)).status == ParamStatus.OK
+            before = link.telemetry()
+            for _ in range(10):
+                link.send(VelocityCommand(0.2, 0.0, 0.0))
+                link.collect(0.05)
+            after = link.telemetry()
+            assert not after.status & Status.OBSTACLE_STOP and after.enc0 > before.enc0 + 100
+        finally:
+            link.close()

@@ -32,6 +32,7 @@ class HostFirmwareBase:
         link_dir: str | os.PathLike[str] | None = None,
         flash: str | os.PathLike[str] | None = None,
         build_dir: Path | None = None,
+        extra_args: tuple[str, ...] = (),
     ) -> None:
         self._own_dir = None if link_dir is not None else tempfile.TemporaryDirectory(prefix="navdeck-fw-")
         directory = Path(link_dir if link_dir is not None else self._own_dir.name)  # type: ignore[union-attr]
@@ -53,6 +54,7 @@ class HostFirmwareBase:
             "--battery", repr(profile.battery_full_v),
             # the motors' full-duty wheel speed: headroom above the profile's top speed
             "--max-wheel-speed", repr(max(20.0, 1.5 * profile.limits.max_vel_x / profile.wheel_radius)),
+            *extra_args,
         ]  # fmt: skip
         self.proc: subprocess.Popen[str] | None = None
 

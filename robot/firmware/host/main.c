@@ -3,7 +3,7 @@
  *   navdeck_fw_host --link /tmp/dev/base [--kinematics skid|diff|omni] [--wheels N]
  *                   [--wheel-radius M] [--track-width M] [--wheel-base M] [--omni-radius M]
  *                   [--ticks-per-rev N] [--battery-cutoff V] [--battery V] [--flash FILE]
- *                   [--max-wheel-speed RAD_S]
+ *                   [--max-wheel-speed RAD_S] [--ir-bits N]
  *
  * Prints "ready LINK" once the link exists. Signals stand in for the cable and the board:
  * SIGUSR1 unplugs (the link vanishes, the core keeps running: its watchdog stops the motors),
@@ -33,7 +33,7 @@ static void usage(void) {
     fprintf(stderr, "usage: navdeck_fw_host --link PATH [--kinematics skid|diff|omni] [--wheels N] "
                     "[--wheel-radius M] [--track-width M] [--wheel-base M] [--omni-radius M] "
                     "[--ticks-per-rev N] [--battery-cutoff V] [--battery V] [--flash FILE] "
-                    "[--max-wheel-speed RAD_S]\n");
+                    "[--max-wheel-speed RAD_S] [--ir-bits N]\n");
     exit(2);
 }
 
@@ -72,6 +72,7 @@ int main(int argc, char **argv) {
         else if (!strcmp(a, "--battery-cutoff")) geo.battery_cutoff = (float)number(a, v);
         else if (!strcmp(a, "--battery")) battery = number(a, v);
         else if (!strcmp(a, "--max-wheel-speed")) board.wheel_max_rad_s = (float)number(a, v);
+        else if (!strcmp(a, "--ir-bits")) g_host.ir_bits = (uint8_t)number(a, v); /* sensors seeing an obstacle */
         else usage();
     }
     if (!g_host.link) usage();
