@@ -12,6 +12,9 @@ command -v chromium >/dev/null 2>&1 || need_apt+=(chromium)
 # Debian keeps initdb/pg_ctl in /usr/lib/postgresql/<major>/bin, off PATH.
 compgen -G "/usr/lib/postgresql/*/bin/initdb" >/dev/null || command -v initdb >/dev/null 2>&1 \
   || need_apt+=(postgresql)
+# The firmware tests compile robot/firmware/ for the host (cc) and cross-compile it for the STM32F429.
+command -v cc >/dev/null 2>&1 || need_apt+=(gcc)
+command -v arm-none-eabi-gcc >/dev/null 2>&1 || need_apt+=(gcc-arm-none-eabi libnewlib-arm-none-eabi)
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     echo "installing ${need_apt[*]} from Debian packages" >&2
@@ -22,7 +25,7 @@ if [ ${#need_apt[@]} -gt 0 ]; then
     fi
     apt-get update -qq >&2 && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_apt[@]}" >&2
   else
-    echo "note: ${need_apt[*]} missing and not root: browser / PostgreSQL tests will be skipped" >&2
+    echo "note: ${need_apt[*]} missing and not root: browser / PostgreSQL / firmware tests will be skipped" >&2
   fi
 fi
 

@@ -23,6 +23,7 @@ from nav.types import Twist2D
 from robot.base import SensorFrame
 from robot.serial.faults import LineFaults
 from robot.serial.protocol import (
+    PARAM_SAVE_ID,
     ErrorCode,
     ErrorReport,
     EStop,
@@ -31,6 +32,7 @@ from robot.serial.protocol import (
     MessageDecoder,
     ParamGet,
     ParamId,
+    ParamSave,
     ParamSet,
     ParamStatus,
     ParamValue,
@@ -101,6 +103,8 @@ class BaseEmulator:
             ParamId.BATTERY_CUTOFF: p.battery_empty_v,
         }
         self.params = dict(self.defaults)
+        # the parameter record in flash: written only by PARAM_SAVE, loaded at (re)boot
+        self.flash: dict[int, float] | None = None
         self._lock = threading.Lock()
         self._sensors = _Sensors(np.zeros(4, dtype=np.int64))
         self._enc_offset = np.zeros(4, dtype=np.int64)
@@ -212,6 +216,9 @@ class BaseEmulator:
             self._send(ParamValue(msg.param_id, value or 0.0, status))
         elif isinstance(msg, ParamSet):
             self._send(self._set_param(msg.param_id, msg.value))
+        elif isinstance(msg, ParamSave):
+            self.flash = dict(self.params)
+            self._send(ParamValue(PARAM_SAVE_ID, float(len(self.flash)), ParamStatus.OK))
         else:
             self._send(ErrorReport(ErrorCode.UNKNOWN_MESSAGE, Severity.WARNING, int(msg.TYPE)))
 
@@ -247,8 +254,8 @@ class BaseEmulator:
                 self._enc_offset = self._sensors.counts.copy()
         if mode == ResetMode.REBOOT:
             self._t0 = time.monotonic()
-            self.params = dict(self.defaults)
-            self.pump.set_ir_stop(True)
+            self.params = dict(self.flash if self.flash is not None else self.defaults)
+            self.pump.set_ir_stop(self.params[ParamId.OBSTACLE_STOP_ENABLE] >= 0.5)
             self._decoder = MessageDecoder()
             self._seq = Sequencer()
 

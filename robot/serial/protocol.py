@@ -31,6 +31,7 @@ class MsgType(IntEnum):
     PARAM_GET = 0x20
     PARAM_SET = 0x21
     PARAM_VALUE = 0x22
+    PARAM_SAVE = 0x23
     ERROR = 0x30
 
 
@@ -74,6 +75,7 @@ class ParamStatus(IntEnum):
     UNKNOWN_ID = 1
     OUT_OF_RANGE = 2
     READ_ONLY = 3
+    FLASH_ERROR = 4  # PARAM_SAVE only: the flash write or its read-back check failed
 
 
 class ErrorCode(IntEnum):
@@ -208,6 +210,19 @@ class ParamValue(Message):
 
 
 @dataclass(frozen=True, slots=True)
+class ParamSave(Message):
+    """Write the parameters now in effect to flash, so they survive a reboot (PARAM_SET alone does
+    not persist). The base answers ``ParamValue(PARAM_SAVE_ID, count written, status)``."""
+
+    TYPE: ClassVar[MsgType] = MsgType.PARAM_SAVE
+    FORMAT: ClassVar[struct.Struct] = struct.Struct("<")
+
+
+PARAM_SAVE_ID = 0
+"""``ParamValue.param_id`` of the answer to ``ParamSave`` (no parameter has id 0)."""
+
+
+@dataclass(frozen=True, slots=True)
 class ErrorReport(Message):
     code: int
     severity: int
@@ -227,6 +242,7 @@ MESSAGE_TYPES: dict[int, type[Message]] = {
         ParamGet,
         ParamSet,
         ParamValue,
+        ParamSave,
         ErrorReport,
     )
 }
