@@ -13,7 +13,9 @@ from robot.profiles import load_profile
 from robot.sim.scenario import ellipse
 from robot.sim.worldgen.base import GeneratedWorld
 
-PROFILE = "omni4"
+PROFILE = "skid4"
+"""The skid robot, as in the issue's greenhouse trials (`sim-nav --people 2`). omni4 (source C's robot)
+runs with ``run_trial(..., profile="omni4")``."""
 POST = 0.1
 MOUND_MARGIN = 0.15
 """Metres of aisle kept free next to a mound beyond the robot's circumscribed diameter (plus a
