@@ -13,7 +13,7 @@ import pytest
 from scipy.ndimage import distance_transform_edt, label
 
 from bench.scenarios import family_bench
-from bench.scenarios.families import ContactLog, run_trial
+from bench.scenarios.families import ContactLog, FamilySet, run_trial
 from bench.scenarios.suite import _fresh
 from nav.types import Pose2D, Twist2D
 from robot.profiles import load_profile
@@ -209,6 +209,12 @@ def test_one_trial_per_family_end_to_end(family: str) -> None:
     assert t.contacts.while_moving == 0
     again = run_trial(family, 0, seed=0, controller="dwa", timeout=1.0)
     assert (again.world_seed, again.start, again.goal) == (t.world_seed, t.start, t.goal)
+    assert again.outcome == "timeout"
+    figs = {f.name: f for f in family_bench.family_figures(FamilySet(family, "dwa", [t, again]))}
+    assert figs[f"{family} (dwa) reached (1/2)"].value == 50.0
+    assert figs[f"{family} (dwa) timeouts (1/2)"].value == 50.0
+    moving = figs[f"{family} (dwa) contacts while moving"]
+    assert moving.value == 0 and moving.ok is True
 
 
 def test_family_benchmarks_registered_per_controller(monkeypatch: pytest.MonkeyPatch) -> None:

@@ -54,8 +54,8 @@ class ContactLog:
     walker_into_stopped: int = 0
     stopped_obstacle: int = 0
     ticks: int = 0
-    _in_contact: bool = False
-    _was_moving: bool = False
+    _in_contact: bool = field(default=False, repr=False)
+    _was_moving: bool = field(default=False, repr=False)
 
     @property
     def while_moving(self) -> int:
