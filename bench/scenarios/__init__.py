@@ -2,9 +2,11 @@
 safety filter) driven through goal sets on a virtual clock, reported as success rates against the
 issue's targets and source A's trial results. The random-goal and quick benchmarks are registered in
 ``bench/navigation.py``; issue 5's per-controller sets in ``bench/scenarios/issue5.py`` (both run by
-``navdeck bench scenarios``). ``suite`` holds the trial sets and runners."""
+``navdeck bench scenarios``); issue 16's family sets (a new generated world per trial) in
+``bench/scenarios/family_bench.py`` (``navdeck bench scenarios.family``). ``suite`` and ``families``
+hold the trial sets and runners."""
 
-from bench.scenarios.issue5 import BENCHMARKS
+from bench.scenarios import family_bench, issue5
 from bench.scenarios.suite import (
     SetResult,
     TrialResult,
@@ -15,6 +17,8 @@ from bench.scenarios.suite import (
     straight_trials,
     turn_trials,
 )
+
+BENCHMARKS = [*issue5.BENCHMARKS, *family_bench.BENCHMARKS]
 
 __all__ = [
     "BENCHMARKS",

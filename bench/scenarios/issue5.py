@@ -42,15 +42,16 @@ SOURCE_A = {"straight": 19, "turns": 18, "obstacle": 19, "person": 16}
 """Source A's results (goals reached out of 20) for comparison."""
 
 
-def trial_count() -> int:
-    """``NAVDECK_SCENARIO_TRIALS`` (default 50, the issue's minimum)."""
-    raw = os.environ.get("NAVDECK_SCENARIO_TRIALS", "50")
+def trial_count(var: str = "NAVDECK_SCENARIO_TRIALS", default: int = 50) -> int:
+    """The positive integer in environment variable ``var`` (default ``NAVDECK_SCENARIO_TRIALS``,
+    50: the issue's minimum), ``default`` when unset."""
+    raw = os.environ.get(var, str(default))
     try:
         n = int(raw)
     except ValueError:
-        raise ValueError(f"NAVDECK_SCENARIO_TRIALS must be a positive integer, got {raw!r}") from None
+        raise ValueError(f"{var} must be a positive integer, got {raw!r}") from None
     if n < 1:
-        raise ValueError(f"NAVDECK_SCENARIO_TRIALS must be a positive integer, got {raw!r}")
+        raise ValueError(f"{var} must be a positive integer, got {raw!r}")
     return n
 
 
