@@ -69,7 +69,7 @@ def fw(tmp_path: Path) -> Iterator[HostFirmwareBase]:
 def server(tmp_path: Path, fw: HostFirmwareBase) -> Iterator[EmbeddedServer]:
     with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "lidar", seed=3) as lidar_only:
         # a 1 s link timeout: the cable pull must fault at once (a vanished port), not a starved thread
-        url = f"{fw.url()}?lidar={lidar_only.lidar_path}&link_timeout=1.0"
+        url = f"{fw.url()}?lidar={lidar_only.lidar_path}&link_timeout=1.0&lidar_timeout=3.0"
         settings = Settings(
             data_dir=tmp_path, db_url=f"sqlite:///{tmp_path / 'navdeck.db'}", viewer=False, robot=url
         )
