@@ -16,6 +16,7 @@ from fastapi.responses import FileResponse, JSONResponse
 from fastapi.staticfiles import StaticFiles
 
 import app.api.routes as routes_pkg
+from app.api.problems import install as install_problems
 from app.api_docs import mount_api_docs
 from app.runtime import Runtime
 
@@ -131,6 +132,7 @@ def create_app(runtime: Runtime) -> FastAPI:
         summary = "; ".join(f"{e['field']}: {e['message']}" for e in errors)
         return JSONResponse(status_code=422, content={"detail": summary, "errors": errors})
 
+    install_problems(app)  # routes may raise ProblemError (RFC 9457 bodies)
     for module in _route_modules():
         app.include_router(module.router)
 

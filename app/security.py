@@ -77,6 +77,7 @@ POLICY: tuple[Rule, ...] = (
     Rule(WRITE, "/api/mapping", Need.UNCONTESTED),
     Rule(WRITE, "/api/localization", Need.DRIVE),
     Rule(WRITE, "/api/navigation", Need.DRIVE),
+    Rule(WRITE, "/api/missions", Need.DRIVE),
     Rule(WRITE, "/api/behaviors", Need.DRIVE),
     Rule(WRITE, "/api/maps", Need.OPERATOR),
     Rule(WRITE, "/api/replay", Need.SIGNED_IN),  # replays a recording in its own 3D view: moves nothing
@@ -130,8 +131,9 @@ LEASE_RULES = """\
 **Control lease.** Many clients may watch; one client at a time holds control, and everyone sees who
 (`GET /api/control`, `control` in `GET /api/robot` and in every telemetry message).
 
-1. Calls that move the robot (`/api/navigation/*`, `/api/localization/*`, `/api/behaviors/*`, teleop on
-   `/ws/teleop`) take the lease when it is free and answer 409 while another client holds it.
+1. Calls that move the robot (`/api/missions`, `/api/navigation/*`, `/api/localization/*`,
+   `/api/behaviors/*`, teleop on `/ws/teleop`) take the lease when it is free and answer 409 while
+   another client holds it.
 2. Mode requests (`POST /api/robot/mode`, `/api/mapping/*`) are not driving: they never take the lease,
    and are refused (409) only while *another* client holds it.
 3. The holder is present while it has a `/ws/teleop` socket open, or for `lease_idle_s` (default 15 s)
@@ -142,8 +144,8 @@ LEASE_RULES = """\
 4. When the lease ends (holder idle, its last socket closed, released, or taken over) only **teleop**
    stops: it is the deadman (teleop commands are also zeroed 0.5 s after the last one). A mission
    (navigation with its recoveries, global localization) and a mapping session keep running with no
-   client connected, until they finish or are stopped by `POST /api/navigation/cancel`, a mode request
-   or the e-stop.
+   client connected, until they finish or are stopped by `POST /api/missions/{id}/cancel` (or
+   `POST /api/navigation/cancel`), a new mission, a mode request or the e-stop.
 5. The e-stop (`POST /api/robot/estop`) is allowed for every signed-in user, always.
 """
 

@@ -8,6 +8,7 @@ from fastapi import Depends, Request, WebSocket
 from pydantic import BaseModel, ConfigDict
 
 from app.runtime import Runtime
+from app.security import principal_of
 
 
 class StrictModel(BaseModel):
@@ -25,3 +26,12 @@ def get_runtime_ws(websocket: WebSocket) -> Runtime:
 
 
 RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
+
+
+def get_actor(request: Request) -> str:
+    """Who is asking, as others may see it (a mission's cancel actor): the user, else ``operator``."""
+    p = principal_of(request.scope)
+    return p.display if p is not None else "operator"
+
+
+ActorDep = Annotated[str, Depends(get_actor)]

@@ -21,9 +21,10 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
+from enum import StrEnum
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
@@ -76,6 +77,44 @@ class GoalRejected(ValueError):
             "index": self.index,
             "nearest_free": None if nf is None else {"x": nf.x, "y": nf.y, "theta": nf.theta},
         }
+
+
+class StopReason(StrEnum):
+    """Why a navigation request was cancelled (issue 22 item 6: each cause is told apart)."""
+
+    OPERATOR_CANCEL = "operator_cancel"  # an explicit cancel (API, dashboard)
+    ESTOP = "estop"  # the e-stop latched
+    FAULT = "fault"  # a fault stopped the robot
+    SUPERSEDED = "superseded"  # a new request replaced it
+    MODE_CHANGE = "mode_change"  # a mode request (teleop, mapping...) took the robot
+    MAP_CHANGED = "map_changed"  # the active map changed under it
+
+
+@dataclass(frozen=True)
+class StopCause:
+    """Who ended a request and why: ``actor`` is the user name for an API call, ``robot`` for a fault."""
+
+    reason: StopReason
+    actor: str
+    message: str = ""
+
+    def as_dict(self) -> dict[str, str]:
+        return {"reason": self.reason.value, "actor": self.actor, "message": self.message}
+
+
+@dataclass
+class _Request:
+    """One navigation request (a mission): all its goals, and how many were reached already."""
+
+    id: int
+    goals: list[Pose2D]
+    reached: int = 0  # goals reached so far (absolute indices below this are done)
+    base: int = 0  # absolute index of the navigator's goal 0 (a request extended by a click)
+
+
+NavListener = Callable[[str, int, dict[str, Any]], None]
+"""``(kind, request_id, data)`` on the loop thread: kind ``started`` | ``progress`` | ``extended`` |
+``ended`` (data: ``outcome``, ``goals``...). Listeners must be quick and never raise."""
 
 
 class NavigationRefused(RuntimeError):
@@ -276,6 +315,10 @@ class Navigation:
         self._seen_resets = 0
         self.costmap_view: str = o.costmap_view  # "global" | "local": which one the 3D view shows
         self._active = False
+        self._request: _Request | None = None
+        self._next_id = 0
+        self._cause: StopCause | None = None
+        self._listeners: list[NavListener] = []
         self._waypoints: tuple[tuple[Pose2D, ...], np.ndarray] | None = None
         # (x, y, theta, behaviour) where each recovery attempt of the current request started; a new
         # tuple on each change so the viewer can tell by identity
@@ -392,13 +435,30 @@ class Navigation:
         if reason is not None:
             raise GoalRejected(reason, goal, nearest_free_pose(cm, goal, r), index)
 
-    def set_goals(self, goals: Sequence[Pose2D], controller: str | None = None) -> None:
+    def add_listener(self, listener: NavListener) -> None:
+        """Be told of request starts, waypoint progress and ends (``NavListener``)."""
+        self._listeners.append(listener)
+
+    def _notify(self, kind: str, request_id: int, **data: Any) -> None:
+        for fn in self._listeners:
+            try:
+                fn(kind, request_id, data)
+            except Exception:  # a listener must not stop the control loop
+                log.exception("navigation listener failed")
+
+    def set_goals(
+        self, goals: Sequence[Pose2D], controller: str | None = None, *, actor: str = "operator"
+    ) -> int:
         """Validate ``goals`` (raises GoalRejected / NavigationRefused) and start navigating through
-        them in order; replaces the current request. ``controller`` ("dwa" | "teb") drives this
-        request only; None: the default one (``NavigationOptions.controller`` or the profile's)."""
+        them in order; replaces (supersedes) the current request. ``controller`` ("dwa" | "teb")
+        drives this request only; None: the default one (``NavigationOptions.controller`` or the
+        profile's). ``actor`` names who asked (the cause of the superseded request's end). Returns
+        the new request's id."""
+        return self._submit(list(goals), controller, actor, extends=None)
+
+    def _submit(self, goals: list[Pose2D], controller: str | None, actor: str, extends: int | None) -> int:
         from nav.navigator import check_controller_name
 
-        goals = list(goals)
         if not goals:
             raise GoalRejected("missing", Pose2D(), None)
         if controller is not None:
@@ -417,33 +477,64 @@ class Navigation:
             raise NavigationRefused(exc.reason, exc.current.value, exc.allowed) from None
         chosen = controller or self.default_controller
         with self._lock:
-            self._pending.append(("goals", (goals, chosen)))
-        self.session.add_event(
-            "navigation",
-            status="goal accepted",
-            goals=[[g.x, g.y, g.theta] for g in goals],
-            controller=chosen,
-        )
-        for g in goals:  # one typed event per goal: what run metrics and the run timeline count
-            self.session.add_event("goal", pose=[g.x, g.y, g.theta])
+            if extends is None:
+                self._next_id += 1
+                rid = self._next_id
+            else:
+                rid = extends
+            self._pending.append(("goals", (goals, chosen, rid, actor, extends is not None)))
+        if extends is None:
+            self.session.add_event(
+                "navigation",
+                status="goal accepted",
+                goals=[[g.x, g.y, g.theta] for g in goals],
+                controller=chosen,
+            )
+        return rid
 
     def add_goal(self, goal: Pose2D) -> None:
-        """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle."""
+        """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle.
+        Extends the current request (same id, its earlier goals are not announced again)."""
         with self._lock:
             requests = [arg for kind, arg in self._pending if kind == "goals"]
-        queued = [g for goals, _ in requests for g in goals]
-        done = self._last_tick.feedback.goal_index if self._last_tick is not None else 0
-        current = self.navigator.goals[done:] if self._active else []
-        # the queue keeps the controller of the request it extends
-        controller = requests[-1][1] if requests else self.navigator.controller_name if current else None
-        self.set_goals([*current, *queued, goal] if (current or queued) else [goal], controller)
+        if requests:  # not picked up by the loop yet: extend the latest one
+            goals, controller, rid, actor, _ = requests[-1]
+            self._submit([*goals, goal], controller, actor, extends=rid)
+            return
+        req = self._request
+        if self._active and req is not None:
+            current = self.navigator.goals[self._goal_index() :]
+            self._submit([*current, goal], self.navigator.controller_name, "operator", extends=req.id)
+            return
+        self.set_goals([goal])
 
-    def cancel(self) -> bool:
-        """Cancel navigation (outcome ``cancelled`` next tick). False if nothing was running."""
+    def _goal_index(self) -> int:
+        tick = self._last_tick
+        return tick.feedback.goal_index if tick is not None else 0
+
+    def cancel(self, actor: str = "operator", reason: StopReason = StopReason.OPERATOR_CANCEL) -> bool:
+        """Cancel navigation (outcome ``cancelled`` next tick, with ``reason`` and ``actor``). False if
+        nothing was running."""
         with self._lock:
             running = self._active or any(k == "goals" for k, _ in self._pending)
-            self._pending.append(("cancel", None))
+            self._pending.append(("cancel", StopCause(reason, actor)))
         return running
+
+    def pending_request(self) -> int | None:
+        """The id of a request accepted but not yet picked up by the loop (None if none)."""
+        with self._lock:
+            for kind, arg in reversed(self._pending):
+                if kind == "goals":
+                    return arg[2]
+                if kind == "cancel":
+                    return None
+        return None
+
+    @property
+    def request_id(self) -> int | None:
+        """The id of the request running now (None when idle)."""
+        req = self._request
+        return req.id if req is not None and self._active else None
 
     def _guard(self) -> str | None:
         if not self.localization.localized:
@@ -458,10 +549,28 @@ class Navigation:
             pending, self._pending = self._pending, []
         for kind, arg in pending:
             if kind == "map":
+                self._cause = StopCause(StopReason.MAP_CHANGED, "operator", "active map changed")
                 self._abort("active map changed", now)
                 self._build_costmaps(arg)
             elif kind == "goals":
-                goals, controller = arg
+                goals, controller, rid, actor, extends = arg
+                req = self._request
+                if extends and self._active and req is not None and req.id == rid:
+                    # a click appended a goal: same request, the reached ones stay reached
+                    req.base = req.reached
+                    added = goals[len(req.goals) - req.base :]
+                    req.goals.extend(added)
+                    self._announce(added)
+                    self.navigator.select_controller(controller)
+                    self.navigator.set_goals(goals)
+                    self._futures.clear()
+                    self._notify("extended", rid, goals=list(req.goals))
+                    continue
+                if self._active and req is not None:
+                    self._supersede(req, actor, rid, now)
+                self._request = _Request(rid, list(goals))
+                self._cause = None
+                self._announce(goals)
                 self.navigator.select_controller(controller)  # resets it: a fresh band / window
                 self.navigator.set_goals(goals)
                 if self.recovery is not None and hasattr(self.recovery, "reset"):
@@ -471,7 +580,9 @@ class Navigation:
                 self._recovery_marks = ()  # markers are kept for the current navigation only
                 self._futures.clear()
                 self._active = True
+                self._notify("started", rid, goals=list(goals))
             elif kind == "cancel" and self._active:
+                self._cause = arg
                 self.navigator.cancel()
                 if session.modes.mode == Mode.RECOVERING:  # the navigator reports it on its next tick
                     session.modes.enter(Mode.NAVIGATING, "cancel during recovery")
@@ -481,6 +592,8 @@ class Navigation:
         self._update_costmaps(session, frame, now)
         mode = session.modes.mode
         if self._active and mode not in (Mode.NAVIGATING, Mode.RECOVERING):
+            if self._cause is None:
+                self._cause = self._mode_cause(mode)
             self.navigator.cancel()  # the operator took over, e-stop, fault...
         if not self._active:
             self._cmd = ZERO_TWIST
@@ -496,6 +609,7 @@ class Navigation:
             tick = replace(tick, outcome=self.navigator.outcome)
         self._last_tick = tick
         self._cmd = tick.cmd
+        self._progress(tick.feedback.goal_index)
         if tick.outcome is not None:
             self._finish(tick, now)
             return
@@ -504,6 +618,66 @@ class Navigation:
         if self.navigator.state.value == "stuck" and mode == Mode.NAVIGATING:
             self._blame_localization()
             self._maybe_recover(self.navigator.stuck_reason, now)
+
+    def _mode_cause(self, mode: Mode) -> StopCause:
+        why = self.session.modes.reason
+        if mode == Mode.ESTOP:
+            source = why.removeprefix("e-stop by ").strip() or "operator"
+            return StopCause(StopReason.ESTOP, source, why)
+        if mode == Mode.FAULT:
+            return StopCause(StopReason.FAULT, "robot", self.session.fault or why)
+        return StopCause(StopReason.MODE_CHANGE, "operator", f"mode changed to {mode.value}: {why}")
+
+    def _announce(self, goals: Sequence[Pose2D]) -> None:
+        """One typed ``goal`` event per goal, once: what run metrics and the run's goal list count."""
+        for g in goals:
+            self.session.add_event("goal", pose=[g.x, g.y, g.theta])
+
+    def _progress(self, goal_index: int) -> None:
+        """Waypoints passed since the last tick: one ``goal_reached`` each (the run's goal list)."""
+        req = self._request
+        if req is None:
+            return
+        reached = min(req.base + goal_index, len(req.goals))
+        if reached > req.reached:
+            for _ in range(reached - req.reached):
+                self.session.add_event("goal_reached", reason="waypoint", message="")
+            req.reached = reached
+            self._notify("progress", req.id, goal_index=reached)
+
+    def _close_goals(self, req: _Request, kind: str, reason: str, message: str) -> None:
+        """End every goal of ``req`` not reached yet: the current one with ``kind``, the rest
+        cancelled (never attempted), so the run's goal list has every waypoint once."""
+        left = len(req.goals) - req.reached
+        if kind == "reached":
+            for _ in range(left):
+                self.session.add_event("goal_reached", reason=reason, message=message)
+            req.reached = len(req.goals)
+            return
+        typed = "goal_failed" if kind == "failed" else "goal_canceled"
+        for i in range(left):
+            if i == 0:
+                self.session.add_event(typed, reason=reason, message=message)
+            else:
+                self.session.add_event("goal_canceled", reason="not_attempted", message=f"after {reason}")
+
+    def _supersede(self, req: _Request, actor: str, new_id: int, now: float) -> None:
+        """A new request replaces a running one: end the old one as cancelled, cause ``superseded``."""
+        cause = StopCause(StopReason.SUPERSEDED, actor, f"replaced by request {new_id}")
+        self.session.add_event(
+            "navigation",
+            status="cancelled",
+            outcome="cancelled",
+            goals_reached=req.reached,
+            **cause.as_dict(),
+        )
+        self._close_goals(req, "cancelled", cause.reason.value, cause.message)
+        self._notify(
+            "ended",
+            req.id,
+            outcome={"kind": "cancelled", "goals_reached": req.reached},
+            cause=cause.as_dict(),
+        )
 
     def _blame_localization(self) -> None:
         """Stuck with the footprint on a wall of the map itself: no robot can stand there, so the
@@ -614,10 +788,19 @@ class Navigation:
         # the goal it reached last, or the one it was heading for when it failed / was cancelled
         i = out.goals_reached - 1 if out.kind == "reached" else out.goals_reached
         goal = goals[min(max(i, 0), len(goals) - 1)] if goals else None
+        cause = self._cause if out.kind == "cancelled" else None
+        if out.kind == "cancelled" and cause is None:
+            cause = StopCause(StopReason.OPERATOR_CANCEL, "operator", out.message)
+        self._cause = None
+        reason = cause.reason.value if cause is not None else out.reason
+        message = cause.message if cause is not None and not out.message else out.message
+        req = self._request
         self.last_outcome = {
             "kind": out.kind,
-            "reason": out.reason,
-            "message": out.message,
+            "reason": reason,
+            "message": message,
+            "actor": None if cause is None else cause.actor,
+            "request_id": None if req is None else req.id,
             "goals_reached": out.goals_reached,
             "t": round(now - self.session.started_at, 3),
             **self._tolerances(),
@@ -629,12 +812,21 @@ class Navigation:
                 out.kind
             ],
             outcome=out.kind,
-            reason=out.reason,
-            message=out.message,
+            reason=reason,
+            message=message,
             goals_reached=out.goals_reached,
+            **({} if cause is None else {"actor": cause.actor}),
         )
-        typed = {"reached": "goal_reached", "failed": "goal_failed", "cancelled": "goal_canceled"}[out.kind]
-        self.session.add_event(typed, reason=out.reason, message=out.message)
+        if req is not None:
+            if out.kind != "reached":
+                self._progress(out.goals_reached)  # waypoints passed in the last tick
+            self._close_goals(req, out.kind, reason, message)
+            self._notify(
+                "ended",
+                req.id,
+                outcome=dict(self.last_outcome, goals_reached=req.reached),
+                cause=None if cause is None else cause.as_dict(),
+            )
         if out.kind == "failed" and isinstance(out.error, PlannerError):
             self.session.add_event("plan_failed", reason=out.reason)
         if self.session.modes.mode in (Mode.NAVIGATING, Mode.RECOVERING):
@@ -707,9 +899,19 @@ class Navigation:
         fb = tick.feedback if tick is not None else None
         goals = self.navigator.goals if self._active else []
         goal = fb.goal if fb is not None and self._active else None
+        state = self.navigator.state.value if self._active or tick is None else tick.state.value
+        active, outcome = self._active, self.last_outcome
+        with self._lock:  # a request the loop has not picked up yet: answer with the state it leads to
+            last = next((p for p in reversed(self._pending) if p[0] in ("goals", "cancel")), None)
+        if last is not None and last[0] == "goals":
+            goals, goal, fb, state, active, outcome = last[1][0], last[1][0][0], None, "planning", True, None
+        elif last is not None and active:
+            state, active = "cancelled", False
+        request = last[1][2] if last is not None and last[0] == "goals" else self.request_id
         return {
-            "state": self.navigator.state.value if self._active or tick is None else tick.state.value,
-            "active": self._active,
+            "state": state,
+            "active": active,
+            "request_id": request,
             "planner": self.options.planner,
             "controller": self.navigator.controller_name,
             "goal": None if goal is None else _pose(goal),
@@ -720,7 +922,7 @@ class Navigation:
             **self._tolerances(),
             **_offset(self.session.pose, goal),
             "activity": "idle" if fb is None else fb.activity,
-            "outcome": self.last_outcome,
+            "outcome": outcome,
             "recoveries": self.recoveries,
             "costmap_view": self.costmap_view,
         }

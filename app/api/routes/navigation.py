@@ -7,7 +7,9 @@ from typing import Any, Literal
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
-from app.api.deps import RuntimeDep, StrictModel
+from app.api.deps import ActorDep, RuntimeDep, StrictModel
+from app.api.problems import ProblemError, problem_responses
+from app.api.routes.missions import get_missions, start_mission
 from nav.types import Pose2D
 
 router = APIRouter(tags=["navigation"])
@@ -55,52 +57,55 @@ def get_navigation(rt: RuntimeDep):
 @router.post(
     "/api/navigation/goals",
     summary="Navigate to a goal, or through a list of goals (waypoints); replaces the current request",
-    description="Takes the control lease if it is free. The mission then runs on its own: it is not "
-    "cancelled when the client goes quiet, closes its sockets or its lease ends (only teleop has a "
-    "deadman); it ends when reached or failed, by `POST /api/navigation/cancel`, a mode request or "
-    "the e-stop. See the lease rules in the API description.",
-    responses={
-        409: {
-            "description": "not localized, e-stop, fault, the mode does not allow navigating, or "
-            "another client holds control"
-        },
-        422: {
-            "description": "goal off the map, in an obstacle or its inscribed radius (+ nearest free "
-            "pose), or an unknown or conflicting controller"
-        },
-    },
+    description="A thin wrapper over `POST /api/missions`: answers the new navigation state (`planning`, "
+    "`active: true`) with the `mission_id` to wait on (`GET /api/missions/{id}?wait=30`). Takes the "
+    "control lease if it is free. The mission then runs on its own: it is not cancelled when the client "
+    "goes quiet, closes its sockets or its lease ends (only teleop has a deadman); it ends when reached "
+    "or failed, by a cancel, a new mission, a mode request or the e-stop. See the lease rules in the API "
+    "description.",
+    responses=problem_responses(
+        s409="not localized, e-stop, fault, the mode does not allow navigating, or another client holds "
+        "control",
+        s422="goal off the map, in an obstacle or its inscribed radius (`reason`, `index`, `nearest_free`), "
+        "or an unknown or conflicting controller",
+    ),
 )
-def post_goals(body: GoalIn | list[GoalIn], rt: RuntimeDep):
-    from app.features.navigation import GoalRejected, NavigationRefused
-
+def post_goals(body: GoalIn | list[GoalIn], rt: RuntimeDep, actor: ActorDep):
     nav, err = _feature(rt)
     if err:
         return err
     goals = body if isinstance(body, list) else [body]
-    if not goals:
-        return JSONResponse({"detail": "goals: give at least one goal"}, status_code=422)
     named = {g.controller for g in goals if g.controller is not None}
     if len(named) > 1:
-        return JSONResponse(
-            {"detail": f"controller: one request drives with one controller, got {sorted(named)}"},
-            status_code=422,
+        raise ProblemError(
+            422,
+            f"controller: one request drives with one controller, got {sorted(named)}",
+            kind="invalid-request",
         )
-    try:
-        nav.set_goals([Pose2D(g.x, g.y, g.theta) for g in goals], named.pop() if named else None)
-    except GoalRejected as exc:
-        return JSONResponse(exc.as_dict(), status_code=422)
-    except NavigationRefused as exc:
-        return JSONResponse(exc.as_dict(), status_code=409)
-    return navigation_state(nav)
+    missions = get_missions(rt)
+    m = start_mission(
+        missions, [Pose2D(g.x, g.y, g.theta) for g in goals], named.pop() if named else None, actor
+    )
+    # the new state (the loop picks the request up on its next tick), and the mission to wait on
+    return {**navigation_state(nav), "mission_id": m.id, "mission_url": f"/api/missions/{m.id}"}
 
 
-@router.post("/api/navigation/cancel", summary="Cancel navigation (the robot stops, outcome 'cancelled')")
-def cancel(rt: RuntimeDep):
+@router.post(
+    "/api/navigation/cancel",
+    summary="Cancel navigation (the robot stops, outcome 'cancelled'); answers the new state",
+)
+def cancel(rt: RuntimeDep, actor: ActorDep):
     nav, err = _feature(rt)
     if err:
         return err
-    was_running = nav.cancel()
-    return {**navigation_state(nav), "cancelled": was_running}
+    missions = get_missions(rt)
+    m = missions.for_request(nav.pending_request() or nav.request_id)
+    if m is not None:
+        was_running = True
+        missions.cancel(m.id, actor)
+    else:
+        was_running = nav.cancel(actor=actor)
+    return {**navigation_state(nav), "cancelled": was_running, "mission_id": None if m is None else m.id}
 
 
 @router.post(
