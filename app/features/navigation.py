@@ -490,6 +490,9 @@ class Navigation:
                 goals=[[g.x, g.y, g.theta] for g in goals],
                 controller=chosen,
             )
+        # the goal list of the run: each goal once (an extension adds only the clicked one); the
+        # outcomes of a superseded request's goals come before this request's, so they pair in order
+        self._announce(goals if extends is None else goals[-1:])
         return rid
 
     def add_goal(self, goal: Pose2D) -> None:
@@ -558,9 +561,7 @@ class Navigation:
                 if extends and self._active and req is not None and req.id == rid:
                     # a click appended a goal: same request, the reached ones stay reached
                     req.base = req.reached
-                    added = goals[len(req.goals) - req.base :]
-                    req.goals.extend(added)
-                    self._announce(added)
+                    req.goals.extend(goals[len(req.goals) - req.base :])
                     self.navigator.select_controller(controller)
                     self.navigator.set_goals(goals)
                     self._futures.clear()
@@ -570,7 +571,8 @@ class Navigation:
                     self._supersede(req, actor, rid, now)
                 self._request = _Request(rid, list(goals))
                 self._cause = None
-                self._announce(goals)
+                if extends:  # the request it extended ended meanwhile: its earlier goals run again
+                    self._announce(goals[:-1])
                 self.navigator.select_controller(controller)  # resets it: a fresh band / window
                 self.navigator.set_goals(goals)
                 if self.recovery is not None and hasattr(self.recovery, "reset"):
