@@ -10,6 +10,7 @@ from fastapi.responses import JSONResponse
 from app.api.deps import ActorDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError, problem_responses
 from app.api.routes.missions import get_missions, start_mission
+from app.features.missions import MissionEnded
 from nav.types import Pose2D
 
 router = APIRouter(tags=["navigation"])
@@ -100,10 +101,11 @@ def cancel(rt: RuntimeDep, actor: ActorDep):
         return err
     missions = get_missions(rt)
     m = missions.for_request(nav.pending_request() or nav.request_id)
-    if m is not None:
-        was_running = True
-        missions.cancel(m.id, actor)
-    else:
+    try:
+        was_running = m is not None and missions.cancel(m.id, actor) is not None
+    except MissionEnded:  # it ended between the look-up and the cancel
+        was_running = False
+    if m is None:
         was_running = nav.cancel(actor=actor)
     return {**navigation_state(nav), "cancelled": was_running, "mission_id": None if m is None else m.id}
 
