@@ -419,7 +419,8 @@ class Recorder:
         self._capture_scan(run, snap, t)
         if snap.goal is not None and snap.goal != run.last_snap_goal and snap.goal.is_finite():
             run.last_snap_goal = snap.goal  # a goal still shown after its outcome is not a new goal
-            self._new_goal(run, t, snap.goal)
+            if not _listed(run.goals, snap.goal):  # waypoints announced by ``goal`` events are listed
+                self._new_goal(run, t, snap.goal)
         self._capture_plan(run, snap, t)
         if snap.behavior != run.last_behavior:
             run.batch.events.append({"t": round(t, 3), "type": "behavior", "behavior": snap.behavior})
@@ -488,10 +489,8 @@ class Recorder:
             run.batch.grids.append((t, snap.grid_version, snap.grid))
 
     def _new_goal(self, run: _OpenRun, t: float, pose: Pose2D) -> None:
-        if run.goals:
-            g = run.goals[-1]
-            if math.hypot(g["x"] - pose.x, g["y"] - pose.y) < 1e-3 and abs(g["theta"] - pose.theta) < 1e-3:
-                return
+        if run.goals and _same_pose(run.goals[-1], pose):
+            return
         g = {"t": round(t, 3), "x": pose.x, "y": pose.y, "theta": pose.theta, "outcome": "pending"}
         run.goals.append(g)
         run.batch.goals.append(dict(g))
@@ -550,3 +549,13 @@ class Recorder:
     def _laser_pose(self) -> tuple[float, float, float]:
         lid = self.session.profile.lidar
         return lid.mount_x, lid.mount_y, lid.mount_yaw
+
+
+def _same_pose(g: dict, pose: Pose2D) -> bool:
+    return math.hypot(g["x"] - pose.x, g["y"] - pose.y) < 1e-3 and abs(g["theta"] - pose.theta) < 1e-3
+
+
+def _listed(goals: list[dict], pose: Pose2D) -> bool:
+    """Whether the run's goal list has ``pose`` already (the goal the robot drives to now is one of
+    the waypoints its request announced, not a new goal: issue 22 item 6)."""
+    return any(_same_pose(g, pose) for g in goals)

@@ -14,6 +14,7 @@ import pytest
 from conftest import make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
+from app.runs.store import RunFilters
 from nav.types import Pose2D
 
 START = {"x": 3.0, "y": 3.5, "theta": 0.0}  # the apartment world's start pose
@@ -197,13 +198,14 @@ def test_goal_endpoints_are_thin_wrappers_answering_the_new_state(
 
 @pytest.fixture
 def rt(tmp_path: Path):
-    from app.features import localization, missions, navigation
+    from app.features import localization, missions, navigation, recording
     from app.runtime import Runtime
     from robot.clock import VirtualClock
 
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
-        for mod in (localization, navigation, missions):  # Runtime.start without the wall-clock thread
+        # what Runtime.start does, without the wall-clock thread
+        for mod in (localization, navigation, missions, recording):
             rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
         rt.on_pose_input("initial_pose", Pose2D(3.0, 3.5, 0.0))
         yield rt
@@ -281,3 +283,15 @@ def test_run_goal_list_has_every_waypoint_once(rt) -> None:
     goals, outcomes = _goal_list(list(s.events)[start:])
     assert goals == 5 and sum(outcomes.values()) == 5, (goals, outcomes)
     assert last.state.value == "succeeded" and outcomes["goal_reached"] == 2
+    # the recorder's goal list of the run: every goal once, each with its own outcome
+    rec = rt.features["recording"]
+    rec.recorder.sync()
+    _, runs = rec.store.list(RunFilters())
+    stored = [(g["x"], g["y"], g["outcome"]) for run in runs for g in rec.store.goals(run["id"])]
+    assert stored == [
+        (7.0, 4.0, "canceled"),
+        (3.0, 1.2, "canceled"),
+        (6.5, 2.5, "canceled"),
+        (3.0, 1.2, "succeeded"),
+        (3.0, 2.0, "succeeded"),
+    ], stored

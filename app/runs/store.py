@@ -64,7 +64,7 @@ class Batch:
     scans: list[LaserScan] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)  # {"t", "type", ...payload}
     plans: list[tuple[float, np.ndarray]] = field(default_factory=list)
-    goals: list[dict] = field(default_factory=list)  # upserts keyed by t: {"t","x","y","theta",...}
+    goals: list[dict] = field(default_factory=list)  # {"t","x","y","theta","outcome",...}: new or outcome
     grids: list[tuple[float, int, OccupancyGrid]] = field(default_factory=list)
     duration_s: float | None = None
     distance_m: float | None = None
@@ -178,7 +178,15 @@ class RunsStore:
                 length = float(np.hypot(*np.diff(p[:, :2], axis=0).T).sum()) if len(p) > 1 else 0.0
                 s.add(RunPlan(run_id=rid, t=t, n=len(p), length_m=length, data=codec.pack_path(p)))
             for g in batch.goals:
-                rec = s.exec(select(RunGoal).where(RunGoal.run_id == rid, RunGoal.t == g["t"])).first()
+                # A new goal is a new row; an outcome updates the oldest pending row set at that t: the
+                # waypoints of one request share a t, and the recorder resolves goals in order (keyed
+                # by t alone, they collapsed into one row: issue 22 item 6).
+                rec = None
+                if g.get("outcome", "pending") != "pending":
+                    q = select(RunGoal).where(
+                        RunGoal.run_id == rid, RunGoal.t == g["t"], RunGoal.outcome == "pending"
+                    )
+                    rec = s.exec(q.order_by(RunGoal.id)).first()
                 rec = rec or RunGoal(run_id=rid, t=g["t"], x=g["x"], y=g["y"], theta=g["theta"])
                 rec.outcome, rec.reason, rec.t_end = (
                     g.get("outcome", "pending"),
@@ -308,7 +316,7 @@ class RunsStore:
 
     def goals(self, run_id: int) -> list[dict]:
         with Session(self.engine) as s:
-            q = select(RunGoal).where(RunGoal.run_id == run_id).order_by(RunGoal.t)
+            q = select(RunGoal).where(RunGoal.run_id == run_id).order_by(RunGoal.t, RunGoal.id)
             return [goal_dict(g) for g in s.exec(q)]
 
     def samples(
