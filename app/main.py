@@ -149,6 +149,8 @@ def create_app(runtime: Runtime) -> FastAPI:
 
     from app.viewer.relay import make_router
 
-    app.include_router(make_router(lambda: runtime.viewer, make_viz_authorize(auth.require_auth)))
+    app.include_router(
+        make_router(lambda: runtime.viewer, make_viz_authorize(auth.require_auth), enabled=settings.viewer)
+    )
     app.mount("/", StaticFiles(directory=FRONTEND_DIR, html=True), name="frontend")
     return app

@@ -47,6 +47,18 @@ TRANSITIONS: dict[Mode, frozenset[Mode]] = {
 # Transitions that only a specific call may make (not a plain mode request).
 RESET_ONLY = frozenset({(Mode.ESTOP, Mode.IDLE), (Mode.FAULT, Mode.IDLE)})
 
+LIDAR_MODES = frozenset({Mode.MAPPING, Mode.LOCALIZING, Mode.NAVIGATING})
+"""Modes that need laser scans (SLAM, AMCL, the costmaps' obstacle layer)."""
+
+
+def no_lidar_reason(what: str) -> str:
+    """The refusal for ``what`` (a mode or request) on a robot served without a lidar."""
+    return (
+        f"this robot has no lidar: {what} needs laser scans"
+        " (serve it with serial://BASE?lidar=/dev/LIDAR to map, localize and navigate; teleop works)"
+    )
+
+
 Guard = Callable[[], str | None]  # returns a refusal reason, or None to allow
 
 
@@ -85,6 +97,7 @@ class ModeMachine:
         self._mode = Mode.IDLE
         self._lock = threading.RLock()
         self._guards: dict[Mode, Guard] = {}
+        self._unavailable: dict[Mode, str] = {}  # modes this robot cannot enter at all, with why
         self._on_change = on_change
         self.reason = ""  # why the current mode was entered (fault text, e-stop source...)
 
@@ -96,11 +109,23 @@ class ModeMachine:
         """A condition checked before entering ``target`` (e.g. navigation needs localization)."""
         self._guards[target] = guard
 
+    def set_unavailable(self, targets: frozenset[Mode], reason: str) -> None:
+        """Modes this robot can never enter (e.g. mapping without a lidar): every request for one is
+        refused with ``reason``, and ``allowed`` leaves them out so the dashboard offers none."""
+        for target in targets:
+            self._unavailable[target] = reason
+
+    def unavailable(self) -> dict[str, str]:
+        """``{mode: reason}`` for the modes this robot cannot enter."""
+        return {m.value: why for m, why in self._unavailable.items()}
+
     def allowed(self, mode: Mode | None = None) -> list[str]:
         """Modes an operator may request from ``mode`` (default: the current one)."""
         mode = self._mode if mode is None else mode
         return sorted(
-            m.value for m in TRANSITIONS[mode] if m in USER_REQUESTABLE and (mode, m) not in RESET_ONLY
+            m.value
+            for m in TRANSITIONS[mode]
+            if m in USER_REQUESTABLE and (mode, m) not in RESET_ONLY and m not in self._unavailable
         )
 
     def request(self, target: str | Mode, reason: str = "operator request") -> Mode:
@@ -114,6 +139,8 @@ class ModeMachine:
                 return mode
             if mode not in USER_REQUESTABLE:
                 raise self._refuse(mode.value, f"mode {mode.value} cannot be requested directly")
+            if mode in self._unavailable:
+                raise self._refuse(mode.value, self._unavailable[mode])
             if mode not in TRANSITIONS[self._mode] or (self._mode, mode) in RESET_ONLY:
                 hint = " (reset first)" if self._mode in (Mode.ESTOP, Mode.FAULT) else ""
                 raise self._refuse(mode.value, f"cannot go from {self._mode.value} to {mode.value}{hint}")
@@ -130,6 +157,8 @@ class ModeMachine:
             if target == self._mode:
                 return True
             if target not in TRANSITIONS[self._mode] or (self._mode, target) in RESET_ONLY:
+                return False
+            if target in self._unavailable:
                 return False
             self._set(target, reason)
             return True

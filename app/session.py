@@ -26,7 +26,7 @@ import numpy as np
 from app.bus import Snapshot, SnapshotBus
 from app.fault_monitor import FaultMonitor, FaultMonitorOptions
 from app.limits import CommandRefused, clamp_speed, limit_acceleration, ramp_duration, sanity_check
-from app.modes import Mode, ModeMachine
+from app.modes import LIDAR_MODES, Mode, ModeMachine, no_lidar_reason
 from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
 from robot.clock import Clock, RealClock
@@ -138,6 +138,10 @@ class Session:
         self.events: deque[dict] = deque(maxlen=500)  # recent events for the UI and the recorder
         self.event_listeners: list[Callable[[dict], None]] = []
         self.modes = ModeMachine(on_change=self._on_mode_change)
+        self.has_lidar = bool(getattr(driver, "has_lidar", True))  # test doubles may not say
+        if not self.has_lidar:
+            for mode in LIDAR_MODES:
+                self.modes.set_unavailable(frozenset({mode}), no_lidar_reason(mode.value))
         self.odometry = WheelOdometry(self.profile)
         self.grid = grid
         self.grid_version = 1 if grid is not None else 0
@@ -154,6 +158,7 @@ class Session:
         self.link_state = LinkState.OK
         self.link_reason = ""
         self.fault: str | None = None
+        self.lidar_fault: str | None = None  # what is wrong with the lidar right now (status Link row)
         self.estop_latched = False
         self.collisions = 0
         self.distance_travelled = 0.0
@@ -442,6 +447,7 @@ class Session:
             self.add_event("collision", pose=[self.pose.x, self.pose.y, self.pose.theta])
         self.link_state, self.link_reason = frame.link.state, frame.link.reason
         # garbage before silence: withheld garbage scans also make the lidar look silent after a while
+        self.lidar_fault = self.fault_monitor.lidar_reason() or self._lidar_silence(now)  # present cause
         fault = frame.fault or self.fault_monitor.lidar_reason() or self._fault_condition(now) or motion_fault
         if fault is not None and self.fault is None:
             self._enter_fault(fault)
@@ -540,6 +546,8 @@ class Session:
         return {
             "link": self.link_state.value,
             "link_reason": self.link_reason,
+            "lidar": self.has_lidar,
+            "lidar_fault": self.lidar_fault,
             "battery_v": batt,
             "battery_pct": pct,
             "scan_age_s": None
@@ -583,8 +591,12 @@ class Session:
         """A fault that holds right now (link lost, lidar silent), or None."""
         if self.link_state == LinkState.LOST:
             return f"link lost: {self.link_reason or 'no telemetry'}"
+        return self._lidar_silence(now)
+
+    def _lidar_silence(self, now: float) -> str | None:
+        """``lidar: no scan for N s`` when an expected lidar fell silent (never without a lidar)."""
         silent = now - max(self.last_scan_time, self.started_at)
-        if silent > self.options.lidar_timeout:
+        if self.has_lidar and silent > self.options.lidar_timeout:
             return f"lidar: no scan for {silent:.1f} s"
         return None
 

@@ -75,6 +75,9 @@ class Driver(Protocol):
     """A robot base with its sensors. ``read`` and ``command`` are called from the control loop only."""
 
     profile: RobotProfile
+    has_lidar: bool
+    """False for a base without a lidar (``serial://...`` with no ``lidar=``): it drives by teleop,
+    and mapping, localization and navigation are refused."""
 
     def read(self) -> SensorFrame: ...
 

@@ -18,9 +18,11 @@ Pure functions: numpy in, numbers out, no I/O (``app/commands/calibrate.py`` dri
 
 from __future__ import annotations
 
+import json
 import math
 import re
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -203,10 +205,11 @@ def _check_ratio(name: str, old: float, new: float, o: CalibrationOptions) -> No
 _TABLE = re.compile(r"^\s*\[")
 
 
-def update_profile_toml(text: str, values: dict[str, float], digits: int = 5) -> str:
+def update_profile_toml(text: str, values: dict[str, float | str], digits: int = 5) -> str:
     """Set top-level ``key = value`` lines of a profile TOML, keeping every other line and the
-    comments (a key that is missing is added before the first table). Values are rounded to
-    ``digits`` significant digits: 0.1 mm on a 65 mm wheel is finer than any tape measure."""
+    comments (a key that is missing is added before the first table). Numbers are rounded to
+    ``digits`` significant digits: 0.1 mm on a 65 mm wheel is finer than any tape measure; strings
+    (``name``) are written as TOML basic strings."""
     lines = text.splitlines(keepends=True)
     first_table = next((i for i, line in enumerate(lines) if _TABLE.match(line)), len(lines))
     pending = dict(values)
@@ -230,5 +233,13 @@ def update_profile_toml(text: str, values: dict[str, float], digits: int = 5) ->
     return "".join(lines)
 
 
-def _fmt(value: float, digits: int) -> str:
+def _fmt(value: float | str, digits: int) -> str:
+    if isinstance(value, str):
+        return json.dumps(value)  # a JSON string with only \" \\ \uXXXX escapes is a TOML basic string
     return f"{float(f'{value:.{digits}g}')!r}"
+
+
+def profile_name_for(path: Path) -> str:
+    """The ``name`` of a profile written to ``path``: its file stem (``wheelie-cal.toml`` ->
+    ``wheelie-cal``), so a calibrated copy is told apart from the stock profile it came from."""
+    return path.stem or "calibrated"

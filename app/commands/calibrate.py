@@ -54,14 +54,18 @@ def register(sub: argparse._SubParsersAction) -> None:
         metavar="PATH",
         help="where to write the corrected profile (default <name>-calibrated.toml)",
     )
-    p.add_argument("--set-firmware", action="store_true", help="serial only: also PARAM_SET the new values")
+    p.add_argument(
+        "--set-firmware",
+        action="store_true",
+        help="serial only: also PARAM_SET the new values (asks first; they last until the base reboots)",
+    )
     p.add_argument("--yes", "-y", action="store_true", help="no confirmations (automation)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     from app.drivers import DriverConfigError, make_driver
-    from robot.calibration import CalibrationError, calibrate, update_profile_toml
+    from robot.calibration import CalibrationError, calibrate, profile_name_for, update_profile_toml
     from robot.clock import RealClock, VirtualClock
     from robot.profiles import ProfileError, load_profile
 
@@ -100,6 +104,11 @@ def run(args: argparse.Namespace) -> int:
     rig = _Rig(driver, profile, clock)
     try:
         rig.wait_for_telemetry()
+        if rig.has_gyro:
+            print(
+                f"gyro bias: {rig.gyro_bias:+.5f} rad/s ({math.degrees(rig.gyro_bias):+.3f} deg/s),"
+                " measured standing still; subtracted from the turn's gyro angle"
+            )
         ask.enter(
             f"Put the robot on a start mark with {args.distance + 0.3:.1f} m clear ahead, then press Enter."
         )
@@ -124,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             measured_angle = 2 * math.pi * ask.number("Measured turns (fractions allowed)", truth_turns)
         result = calibrate(profile, straight.dticks, measured_d, turn.dticks, measured_angle, turn.gyro_angle)
         if args.set_firmware:
-            rig.set_firmware(result.changes())
+            _write_firmware(rig, result.changes(), ask)
     except CalibrationError as exc:
         raise CliError(str(exc)) from None
     finally:
@@ -134,16 +143,34 @@ def run(args: argparse.Namespace) -> int:
     print(f"wheel_radius: {result.wheel_radius:.5f} -> {result.wheel_radius_new:.5f} m")
     print(f"{result.turn_field}: {result.turn_value:.5f} -> {result.turn_value_new:.5f} m")
     out = Path(args.write) if args.write else Path.cwd() / f"{profile.name}-calibrated.toml"
-    if not args.yes and not ask.confirm(f"Write the corrected profile to {out}?"):
+    name = profile_name_for(out)
+    if not args.yes and not ask.confirm(f"Write the corrected profile to {out} (name = {name!r})?"):
         print("not written")
         return 0
-    text = update_profile_toml(Path(profile.source).read_text(), result.changes())
+    changes: dict[str, float | str] = {**result.changes(), "name": name}
+    text = update_profile_toml(Path(profile.source).read_text(), changes)
     try:
         out.write_text(text)
     except OSError as exc:
         raise CliError(f"cannot write {out}: {exc.strerror or exc}") from None
     print(f"wrote {out}")
     return 0
+
+
+FIRMWARE_PERSISTENCE = (
+    "PARAM_SET values live in the base's RAM: they are lost when the base reboots or is reflashed"
+    " (the protocol has no save-to-flash message), so the profile file is what keeps them"
+)
+
+
+def _write_firmware(rig: _Rig, values: dict[str, float], ask: _Asker) -> None:
+    """PARAM_SET the corrected values, after the operator said yes (``--yes`` counts as yes)."""
+    listing = ", ".join(f"{k} = {v:.5f}" for k, v in values.items())
+    print(f"note: {FIRMWARE_PERSISTENCE}")
+    if not ask.yes and not ask.confirm(f"Write {listing} into the base's firmware parameters?"):
+        print("firmware not changed")
+        return
+    rig.set_firmware(values)
 
 
 class _Asker:
@@ -184,6 +211,13 @@ class _Asker:
             print("give a positive number")
 
 
+def _bar(fraction: float, width: int = 20) -> str:
+    """``[#######-------------]  35%``: a text progress bar for a terminal line."""
+    f = min(max(fraction, 0.0), 1.0)
+    n = round(f * width)
+    return f"[{'#' * n}{'-' * (width - n)}] {f * 100:3.0f}%"
+
+
 @dataclass(frozen=True)
 class _Run:
     """One calibration run: encoder deltas, the gyro's integrated angle and ground truth if simulated."""
@@ -199,6 +233,7 @@ class _Rig:
     """Drives the robot through a ``Driver`` at 20 Hz and integrates encoders and gyro."""
 
     PERIOD = 0.05
+    PROGRESS_PERIOD = 0.5  # s between progress line updates on stderr
 
     def __init__(self, driver: Driver, profile: RobotProfile, clock: Clock) -> None:
         self.driver = driver
@@ -266,16 +301,28 @@ class _Rig:
         if len(self._still_gyro) >= 3:
             self.gyro_bias = float(np.mean(self._still_gyro))
 
-    def _run(self, cmd: Twist2D, done: Callable[[tuple[float, float], float], bool], timeout: float) -> _Run:
+    def _run(
+        self,
+        cmd: Twist2D,
+        done: Callable[[tuple[float, float], float], bool],
+        timeout: float,
+        progress: Callable[[tuple[float, float], float], str],
+    ) -> _Run:
         from robot.calibration import encoder_motion
 
         t0, pose0, yaw0, gyro0 = self.ticks.copy(), self._truth_prev, self.truth_yaw, self.gyro_angle
         end = self.clock.now() + timeout
-        while not done(encoder_motion(self.profile, self.ticks - t0), self.gyro_angle - gyro0):
+        shown = -math.inf
+        while not done(motion := encoder_motion(self.profile, self.ticks - t0), self.gyro_angle - gyro0):
+            if self.clock.now() - shown >= self.PROGRESS_PERIOD:  # one line rewritten in place
+                shown = self.clock.now()
+                print(f"\r{progress(motion, self.gyro_angle - gyro0)}", end="", file=sys.stderr, flush=True)
             if self.clock.now() > end:
+                print(file=sys.stderr)
                 self._settle()
                 raise CliError(f"the run did not finish within {timeout:.0f} s (is the robot blocked?)")
             self._tick(cmd)
+        print(f"\r{progress(motion, self.gyro_angle - gyro0)}", file=sys.stderr, flush=True)
         self._settle()
         dticks = self.ticks - t0
         dist, ang = encoder_motion(self.profile, dticks)
@@ -287,8 +334,11 @@ class _Rig:
     def straight(self, distance: float, speed: float) -> _Run:
         from nav.types import Twist2D
 
+        def progress(enc: tuple[float, float], _gyro: float) -> str:
+            return f"driving: {_bar(enc[0] / distance)} {enc[0]:.2f} / {distance:.2f} m"
+
         return self._run(
-            Twist2D(speed, 0.0, 0.0), lambda enc, _g: enc[0] >= distance, 3 * distance / speed + 5
+            Twist2D(speed, 0.0, 0.0), lambda enc, _g: enc[0] >= distance, 3 * distance / speed + 5, progress
         )
 
     def spin(self, angle: float, rate: float) -> _Run:
@@ -297,7 +347,12 @@ class _Rig:
         def done(enc: tuple[float, float], gyro: float) -> bool:
             return (gyro if self.has_gyro else enc[1]) >= angle
 
-        return self._run(Twist2D(0.0, 0.0, rate), done, 3 * angle / rate + 5)
+        def progress(enc: tuple[float, float], gyro: float) -> str:
+            turned, goal = (gyro if self.has_gyro else enc[1]) / (2 * math.pi), angle / (2 * math.pi)
+            by = "gyro" if self.has_gyro else "encoders"
+            return f"turning: {_bar(turned / goal)} {turned:.2f} / {goal:.2f} turns ({by})"
+
+        return self._run(Twist2D(0.0, 0.0, rate), done, 3 * angle / rate + 5, progress)
 
     @staticmethod
     def truth_distance(run: _Run) -> float | None:

@@ -27,7 +27,7 @@ from typing import TYPE_CHECKING, Any, Literal
 
 import numpy as np
 
-from app.modes import Mode
+from app.modes import Mode, no_lidar_reason
 from nav.types import OccupancyGrid, Pose2D, Twist2D
 
 if TYPE_CHECKING:
@@ -153,6 +153,8 @@ class Localization:
 
     def check_pose(self, pose: Pose2D) -> None:
         """Raise ``LocalizationRequestError`` naming why ``pose`` cannot be the robot's pose."""
+        if not self.session.has_lidar:
+            raise LocalizationRequestError(no_lidar_reason("localization (AMCL)"))
         grid = self.grid
         if grid is None:
             raise NoActiveMapError("no active map: choose a map first")
@@ -187,6 +189,8 @@ class Localization:
     def start_global(self) -> None:
         """Spread the particles over the free space and rotate in place (mode LOCALIZING) until
         converged. Raises ``app.modes.TransitionRefused`` when the mode machine says no."""
+        if not self.session.has_lidar:  # the mode machine's lidar refusal, before "no active map"
+            self.session.modes.request(Mode.LOCALIZING, "global localization")
         if self.grid is None:
             raise NoActiveMapError("no active map: choose a map first")
         if self.options.source == "truth":

@@ -466,7 +466,8 @@ class Navigation:
         mode = self.session.modes.mode
         if mode in (Mode.ESTOP, Mode.FAULT) or self.session.estop_latched:
             raise NavigationRefused(f"cannot navigate in mode {mode.value} (reset first)", mode.value)
-        why = self._guard()
+        # a robot without a lidar says so first, not "not localized"
+        why = self.session.modes.unavailable().get(Mode.NAVIGATING.value) or self._guard()
         if why:
             raise NavigationRefused(why, mode.value, self.session.modes.allowed())
         for i, g in enumerate(goals):

@@ -46,8 +46,20 @@ def _allow_all(_ws: WebSocket) -> bool:
     return True
 
 
-def make_router(get_viewer: Callable[[], Viewer | None], authorize: Authorize = _allow_all) -> APIRouter:
-    """Routes ``GET /viz`` (redirect), ``GET /viz/`` (viser client page) and ``WS /viz`` (relay)."""
+VIEWER_OFF_HTML = """<!doctype html><html><head><meta charset="utf-8"><title>3D view off</title>
+<style>body{font:14px system-ui,sans-serif;color:#8a93a0;background:#101418;display:flex;
+align-items:center;justify-content:center;height:100vh;margin:0;text-align:center}</style></head>
+<body><p id="viewer-off">The 3D view is off: the server was started with <code>--no-viewer</code>.</p>
+</body></html>"""
+"""``GET /viz/`` when the server runs without the 3D view: viser's page would say "Connecting..."
+forever, since its websocket is refused each time."""
+
+
+def make_router(
+    get_viewer: Callable[[], Viewer | None], authorize: Authorize = _allow_all, enabled: bool = True
+) -> APIRouter:
+    """Routes ``GET /viz`` (redirect), ``GET /viz/`` (viser client page, or a note that the view is
+    off when not ``enabled``) and ``WS /viz`` (relay)."""
     router = APIRouter()
     # unpack the client now, off the caller's thread, so the first page load does not wait for it
     threading.Thread(target=client_files, name="viser-client-unpack", daemon=True).start()
@@ -58,6 +70,8 @@ def make_router(get_viewer: Callable[[], Viewer | None], authorize: Authorize = 
 
     @router.get("/viz/", include_in_schema=False)
     def viz_index() -> Response:
+        if not enabled:
+            return Response(VIEWER_OFF_HTML, media_type="text/html", headers={"cache-control": "no-cache"})
         files = client_files()
         if files is None:
             return FileResponse(CLIENT_HTML, media_type="text/html")

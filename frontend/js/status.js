@@ -42,13 +42,18 @@ function render(t) {
     delete beh.dataset.behavior;
   }
   $("#st-pose").textContent = `x ${fmt(t.pose.x)}  y ${fmt(t.pose.y)}  θ ${deg(t.pose.theta)}°`;
-  $("#st-speed").textContent = `${fmt(t.velocity.linear.x)} m/s  ${fmt(t.velocity.angular.z)} rad/s`;
+  const h = t.health || {};
+  const lost = h.link === "lost"; // the last speeds are stale, not the robot's: show none
+  $("#st-speed").textContent = lost ? "— (base link lost)" : `${fmt(t.velocity.linear.x)} m/s  ${fmt(t.velocity.angular.z)} rad/s`;
   const cl = t.clamped && t.clamped.length ? ` (clamped: ${t.clamped.join(", ")})` : "";
   $("#st-cmd").textContent = `${fmt(t.command.linear.x)} m/s  ${fmt(t.command.angular.z)} rad/s${cl}`;
-  const h = t.health || {};
+  // base link, then the lidar: a lidar fault is not an "ok" link, and a base-only robot says so
   const link = $("#st-link");
-  link.textContent = `${h.link || "?"}${h.link_reason ? ": " + h.link_reason : ""}  scan age ${fmt(h.scan_age_s, 2)} s`;
-  link.className = h.link === "ok" ? "ok-text" : "bad-text";
+  const base = `${h.link || "?"}${h.link_reason ? ": " + h.link_reason : ""}`;
+  const lidar = h.lidar === false ? "no lidar (base only)"
+    : h.lidar_fault ? h.lidar_fault : `scan age ${fmt(h.scan_age_s, 2)} s`;
+  link.textContent = `${base}  ${lidar}`;
+  link.className = h.link === "ok" && !h.lidar_fault ? "ok-text" : "bad-text";
   const batt = $("#st-battery");
   batt.textContent = h.battery_v ? `${fmt(h.battery_v, 1)} V (${fmt(h.battery_pct, 0)}%)` : "–";
   batt.className = h.battery_pct !== null && h.battery_pct !== undefined && h.battery_pct < 20 ? "bad-text" : "";

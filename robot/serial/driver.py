@@ -64,7 +64,8 @@ class SerialOptions:
     port: str
     """Base (STM32) serial device, e.g. ``/dev/ttyUSB0`` or ``/dev/serial/by-id/...``."""
     lidar_port: str | None = None
-    """RPLidar A1 USB adapter device; None: no lidar."""
+    """RPLidar A1 USB adapter device; None: a base without a lidar (URL without ``lidar=`` or with
+    ``lidar=none``): teleop only, mapping and navigation are refused."""
     baud: int = 115200
     """Base UART baud rate (8N1)."""
     lidar_baud: int = 115200
@@ -88,9 +89,9 @@ class SerialOptions:
 def parse_serial_url(url: str) -> SerialOptions:
     """``serial:///dev/ttyUSB0?lidar=/dev/ttyUSB1&baud=115200`` -> ``SerialOptions``.
 
-    Query keys: ``lidar``, ``baud``, ``lidar_baud``, ``link_timeout``, ``lidar_timeout``,
-    ``keepalive_period``, ``command_hold``. Unknown keys are an error, so a typo does not silently
-    fall back to a default.
+    Query keys: ``lidar`` (a device, or ``none`` for a base without a lidar), ``baud``,
+    ``lidar_baud``, ``link_timeout``, ``lidar_timeout``, ``keepalive_period``, ``command_hold``.
+    Unknown keys are an error, so a typo does not silently fall back to a default.
     """
     parsed = urlparse(url)
     if parsed.scheme != "serial":
@@ -125,6 +126,8 @@ def parse_serial_url(url: str) -> SerialOptions:
             ) from exc
         if conv is not str and converted <= 0:  # type: ignore[operator]
             raise SerialUrlError(f"robot URL {url!r}: {key} must be positive")
+        if key == "lidar" and str(converted).lower() == "none":
+            converted = None  # said explicitly: this base has no lidar
         kwargs[field_name] = converted or None
     return SerialOptions(**kwargs)  # type: ignore[arg-type]
 
@@ -457,6 +460,7 @@ class SerialDriver:
         self._estop_sent = False
         self._base = BaseLink(opts, self.clock)
         self._lidar = None
+        self.has_lidar = bool(opts.lidar_port)
         if opts.lidar_port:
             from robot.serial.rplidar import RPLidar, RPLidarOptions
 

@@ -26,7 +26,10 @@ def describe_open_error(port: str, exc: BaseException) -> str:
     if code == errno.EACCES:
         return f"permission denied on {port} (add your user to the 'dialout' group)"
     if code in (errno.EBUSY, errno.EAGAIN, errno.EWOULDBLOCK) or "exclusively lock" in text:
-        return f"serial port {port} is busy (another program has it open)"
+        return (
+            f"serial port {port} is busy (another program has it open: stop a running"
+            " `navdeck serve` or serial monitor first)"
+        )
     first = text.splitlines()[0] if text else type(exc).__name__
     return f"cannot open serial port {port}: {first}"
 

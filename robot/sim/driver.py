@@ -34,6 +34,8 @@ from robot.sim.world import World
 class SimDriver:
     """A simulated robot base implementing ``robot.base.Driver``."""
 
+    has_lidar = True  # the simulated lidar can fall silent (fault switch), but it is always expected
+
     def __init__(
         self,
         world: World,
