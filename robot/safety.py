@@ -27,7 +27,8 @@ at 20 Hz) moved into the current base frame by the filter's own output twists si
 (a dedicated proximity switch is trusted alone). Invalid ranges (NaN, +-inf, negative, beyond
 ``range_max``) are ignored: REP-117's ``-inf`` (closer than ``range_min``) cannot be placed; the IR
 sensors cover that blind spot in front. A scan older than ``source_timeout``, or one with more than
-``max_invalid_fraction`` garbage beams (NaN, negative, absurd), stops the robot.
+``max_invalid_fraction`` garbage beams (NaN, negative, absurd), stops the robot; a robot without a
+lidar (``lidar=False``, teleop only) is filtered on its IR sensors alone.
 Everything per call is a few vectorized numpy operations over the readings near the robot.
 """
 
@@ -172,9 +173,14 @@ def _boundary_distance(points: np.ndarray, a: np.ndarray, e: np.ndarray, inv: np
 class SafetyFilter:
     """``filter(cmd, frame) -> (cmd', reason | None)``: the session's ``safety`` hook."""
 
-    def __init__(self, profile: RobotProfile, options: SafetyOptions | None = None) -> None:
+    def __init__(
+        self, profile: RobotProfile, options: SafetyOptions | None = None, lidar: bool = True
+    ) -> None:
         self.profile = profile
         self.options = options or SafetyOptions()
+        # False: a base served without a lidar (teleop only): no scan is expected, so its absence does
+        # not stop the robot; the IR sensors (and the base's own obstacle stop) are the readings left.
+        self.lidar = lidar
         o = self.options
         self._a, self._e, self._inv = _polygon_geometry(profile.footprint_polygon(32))
         self._reach_fp = float(np.max(np.hypot(self._a[:, 0], self._a[:, 1])))
@@ -330,7 +336,7 @@ class SafetyFilter:
         self._ingest(frame)
         now = frame.stamp
         age = now - self._scan_stamp
-        if age > o.source_timeout:
+        if self.lidar and age > o.source_timeout:
             if cmd.is_zero():
                 self.status = SafetyStatus(None, None, math.inf, None)
                 return cmd, None

@@ -6,7 +6,16 @@ import itertools
 
 import pytest
 
-from app.modes import RESET_ONLY, TRANSITIONS, USER_REQUESTABLE, Mode, ModeMachine, TransitionRefused
+from app.modes import (
+    LIDAR_MODES,
+    RESET_ONLY,
+    TRANSITIONS,
+    USER_REQUESTABLE,
+    Mode,
+    ModeMachine,
+    TransitionRefused,
+    no_lidar_reason,
+)
 
 
 def machine_in(mode: Mode) -> ModeMachine:
@@ -81,3 +90,17 @@ def test_guard_refuses_with_reason_and_change_callback() -> None:
         m.request("navigating")
     m.request("teleop")
     assert seen == [(Mode.IDLE, Mode.TELEOP, "operator request")]
+
+
+def test_unavailable_modes_are_refused_with_their_reason_and_not_offered() -> None:
+    """Issue 23 item 2: a robot without a lidar never enters a mode that needs scans."""
+    m = ModeMachine()
+    m.set_unavailable(LIDAR_MODES, no_lidar_reason("that mode"))
+    assert set(m.allowed()) == {"teleop"}
+    for mode in LIDAR_MODES:
+        with pytest.raises(TransitionRefused) as exc:
+            m.request(mode)
+        assert str(exc.value).startswith("this robot has no lidar:") and m.mode == Mode.IDLE
+        assert not m.enter(mode, "system")
+    assert m.request(Mode.TELEOP) == Mode.TELEOP
+    assert m.unavailable() == {mode.value: no_lidar_reason("that mode") for mode in LIDAR_MODES}

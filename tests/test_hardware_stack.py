@@ -449,3 +449,55 @@ def test_a_key_held_through_a_reset_does_not_move_the_robot(
         assert all(m.vx == 0.0 and m.wz == 0.0 for m in velocities)
         ws.send(twist())  # released ...
         assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)  # ... pressed again: it turns
+
+
+def test_a_base_without_a_lidar_drives_by_teleop_and_refuses_mapping_and_navigation(tmp_path: Path) -> None:
+    """Issue 23 item 2: ``serial://BASE`` alone (``emulate base --no-lidar``) is served: no "lidar: no
+    scan" fault however long it runs, teleop drives it, and every lidar mode is refused with the reason."""
+    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=6, lidar=False) as pair:
+        url = patient(pair)
+        assert "lidar=" not in url
+        with serve_in_thread(make_settings(tmp_path, robot=url)) as server:
+            session = server.runtime.session
+            assert wait_for(lambda: session.odom_pose is not None and session.health()["link"] == "ok", 10.0)
+            time.sleep(session.options.lidar_timeout + 0.5)  # an expected lidar would have faulted by now
+            assert session.fault is None and session.modes.mode.value == "idle"
+            state = httpx.get(f"{server.url}/api/robot", timeout=10).json()
+            assert state["health"]["lidar"] is False and state["health"]["lidar_fault"] is None
+            assert set(state["allowed_modes"]) & {"mapping", "localizing", "navigating"} == set()
+            with connect(f"{server.ws_url}/ws/teleop") as ws:
+                assert hello(ws)["driving"] is True
+                assert drive_until(ws, moved_beyond(pair, 0.1), vx=0.15), session.fault
+                assert session.fault is None
+            for path, body in [
+                ("/api/robot/mode", {"mode": "mapping"}),
+                ("/api/robot/mode", {"mode": "navigating"}),
+                ("/api/mapping/start", None),
+                ("/api/localization/global", None),
+                ("/api/navigation/goals", {"x": 1.0, "y": 0.0, "theta": 0.0}),
+            ]:
+                r = httpx.post(f"{server.url}{path}", json=body, timeout=10)
+                assert r.status_code == 409, (path, r.text)
+                assert r.json()["detail"].startswith("this robot has no lidar:"), (path, r.text)
+            r = httpx.post(f"{server.url}/api/localization/initial_pose", json={"x": 0, "y": 0, "theta": 0})
+            assert r.status_code == 422 and "this robot has no lidar" in r.json()["detail"]
+            assert session.fault is None
+
+
+def test_health_names_a_lidar_fault_and_clears_it_when_scans_return(
+    pair: EmulatorPair, patient_server: EmbeddedServer
+) -> None:
+    """The dashboard's Link row reads ``health.lidar_fault``: set while the lidar is silent, back to
+    None once scans arrive again and the fault is reset."""
+    server, session = patient_server, patient_server.runtime.session
+    assert session.health()["lidar"] is True and session.health()["lidar_fault"] is None
+    assert pair.lidar is not None
+    pair.lidar.faults.stall = True
+    assert wait_for(lambda: session.modes.mode.value == "fault", timeout=6.0)
+    health = httpx.get(f"{server.url}/api/robot", timeout=10).json()["health"]
+    assert health["link"] == "ok" and "lidar" in (health["lidar_fault"] or "")
+    pair.lidar.faults.stall = False
+    assert wait_for(lambda: session.health()["lidar_fault"] is None, timeout=10.0)
+    assert httpx.post(f"{server.url}/api/robot/reset", timeout=10).status_code == 200
+    state = httpx.get(f"{server.url}/api/robot", timeout=10).json()
+    assert state["fault"] is None and state["health"]["lidar_fault"] is None

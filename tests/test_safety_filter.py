@@ -142,6 +142,16 @@ def test_stale_or_missing_scan_stops() -> None:
     assert f(Twist2D(), frame(2.6)) == (Twist2D(), None)
 
 
+def test_a_robot_without_a_lidar_is_not_stopped_for_want_of_scans_but_ir_still_stops_it() -> None:
+    """Issue 23 item 2: a base served without a lidar drives by teleop; its IR sensors still count."""
+    f = SafetyFilter(SKID, lidar=False)
+    assert f(Twist2D(0.2, 0, 0), frame(0.0)) == (Twist2D(0.2, 0, 0), None)
+    assert f(Twist2D(0.2, 0, 0), frame(5.0)) == (Twist2D(0.2, 0, 0), None)
+    ir = IrReading(5.05, np.array([True, False]), np.array([0.02, np.inf]))
+    out, reason = f(Twist2D(0.2, 0, 0), frame(5.05, ir=ir))
+    assert out.is_zero() and reason.startswith("stop: IR 0")
+
+
 @pytest.mark.parametrize(
     "kwargs",
     [{"stop_margin": -1.0}, {"slowdown_ratio": 1.5}, {"min_points": 0}, {"time_before_collision": 0.0}],

@@ -134,6 +134,9 @@ def test_parse_url() -> None:
     assert parse_serial_url("serial://ttyACM0").port == "/dev/ttyACM0"
     assert parse_serial_url("serial:///dev/ttyUSB0?link_timeout=0.5").link_timeout == 0.5
     assert parse_serial_url("serial:///dev/ttyUSB0?lidar_timeout=3").lidar_timeout == 3.0
+    # a base without a lidar: no lidar= at all, or said explicitly
+    assert parse_serial_url("serial:///dev/ttyUSB0").lidar_port is None
+    assert parse_serial_url("serial:///dev/ttyUSB0?lidar=none").lidar_port is None
     for bad in (
         "tcp://x",
         "serial://",

@@ -30,7 +30,7 @@ class SafetyFeature:
 
     def __init__(self, runtime: Runtime, options: SafetyOptions | None = None) -> None:
         self.session = runtime.session
-        self.filter = SafetyFilter(runtime.profile, options)
+        self.filter = SafetyFilter(runtime.profile, options, lidar=runtime.session.has_lidar)
         self._last_action: str | None = None
         self._contact_at = -math.inf  # when the base last reported a contact
         self._contact_with: str | None = None

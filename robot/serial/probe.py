@@ -60,8 +60,9 @@ class ProbeResult:
     detail: str
 
 
-def by_id_links(by_id_dir: Path = BY_ID_DIR) -> dict[str, list[str]]:
+def by_id_links(by_id_dir: Path | None = None) -> dict[str, list[str]]:
     """``{/dev/ttyUSB0: [/dev/serial/by-id/usb-Silicon_Labs_CP2102_...-port0]}``: udev's stable names."""
+    by_id_dir = BY_ID_DIR if by_id_dir is None else by_id_dir
     links: dict[str, list[str]] = {}
     if not by_id_dir.is_dir():
         return links
