@@ -26,7 +26,8 @@ from robot.calibration import (
 )
 from robot.profiles import PROFILE_DIR, load_profile, profile_from_dict
 from robot.serial.emulate import EmulatorPair
-from robot.serial.protocol import ParamId
+from robot.serial.port import open_port
+from robot.serial.protocol import ParamId, ParamSet
 
 TRUE = load_profile("skid4")
 OMNI = load_profile("omni4")
@@ -262,5 +263,70 @@ def test_calibrate_over_serial_recovers_a_wrong_wheel_radius(tmp_path: Path, mon
         assert pair.base.params[2] == pytest.approx(cal.track_width, rel=1e-4)
 
 
+def test_set_firmware_asks_before_any_write_and_says_values_do_not_survive_a_reboot(
+    tmp_path: Path, monkeypatch, capsys
+) -> None:
+    """Issue 23 item 3: without --yes, "no" to the firmware question leaves the base untouched (no
+    PARAM_SET reached it), and the note says PARAM_SET values are lost on a reboot."""
+    with EmulatorPair(TRUE, world="box", link_dir=tmp_path / "dev", lidar=False, seed=2) as pair:
+        prompts: list[str] = []
+
+        def operator(prompt: str = "") -> str:
+            prompts.append(prompt)
+            if prompt.startswith("Write the corrected profile"):
+                return "y"
+            if "firmware parameters" in prompt:
+                assert not [m for _, m in pair.base.message_log if isinstance(m, ParamSet)]
+                return "n"
+            return ""  # Enter at the "put the robot on a mark" prompts
+
+        monkeypatch.setattr("builtins.input", operator)
+        pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
+        out = tmp_path / "wheelie.toml"
+        before = dict(pair.base.params)
+        url = pair.url() + "?link_timeout=1.0"
+        argv = ["calibrate", "--robot", url, "--profile", str(wrong_toml(tmp_path))]
+        argv += ["--distance", "0.3", "--speed", "0.25", "--turns", "0.5", "--turn-speed", "1.0"]
+        argv += ["--measured-distance", "0.3", "--gyro-turns", "--write", str(out), "--set-firmware"]
+        rc = main(argv)
+        printed = capsys.readouterr()
+        assert rc == 0, printed.err
+        assert any("firmware parameters" in p for p in prompts), prompts
+        assert any("Write the corrected profile" in p for p in prompts), (prompts, printed.out)
+        assert not [m for _, m in pair.base.message_log if isinstance(m, ParamSet)]
+        assert pair.base.params == before
+        assert "lost when the base reboots" in printed.out and "firmware not changed" in printed.out
+        assert load_profile(out).name == "wheelie"  # the written profile is no longer "skid4"
+
+
+def test_calibrate_prints_the_gyro_bias_and_progress(tmp_path: Path, capsys) -> None:
+    """Issue 23 item 6: the measured gyro bias on stdout, a progress line on stderr for each run, and
+    the written profile named after its file."""
+    out = tmp_path / "my-robot.toml"
+    argv = ["calibrate", "--robot", "sim", "--distance", "0.4", "--speed", "0.2", "--turns", "1"]
+    argv += ["--turn-speed", "0.8", "--yes", "--write", str(out)]
+    assert main(argv) == 0
+    printed = capsys.readouterr()
+    bias = printed.out.split("gyro bias: ")[1]
+    assert "rad/s" in bias.splitlines()[0]
+    float(bias.split(" rad/s")[0])  # a number
+    assert "driving: [" in printed.err and "0.40 m" in printed.err
+    assert "turning: [" in printed.err and "/ 1.00 turns (gyro)" in printed.err and "100%" in printed.err
+    assert load_profile(out).name == "my-robot"
+    assert 'name = "my-robot"' in out.read_text()
+
+
 def _skid4_dict() -> dict:
     return tomllib.loads((PROFILE_DIR / "skid4.toml").read_text())
+
+
+def test_calibrate_on_a_port_the_server_holds_says_to_stop_it(tmp_path: Path, capsys) -> None:
+    """Issue 23 item 6: "port is busy" says what to do (stop the server first)."""
+    with EmulatorPair(TRUE, world="box", link_dir=tmp_path / "dev", lidar=False) as pair:
+        held = open_port(pair.base_path, 115200)  # what a running `navdeck serve` does
+        try:
+            assert main(["calibrate", "--robot", pair.url(), "--yes"]) == 2
+        finally:
+            held.close()
+    err = capsys.readouterr().err.strip()
+    assert "is busy" in err and "stop a running `navdeck serve`" in err and "\n" not in err
