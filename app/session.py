@@ -556,6 +556,8 @@ class Session:
             "loop": self.stats.summary(),
             "collisions": self.collisions,
             "fault": self.fault,
+            # the fault latched but its cause is gone: a reset will be accepted (the dashboard says so)
+            "fault_cleared": self.fault is not None and self._fault_still_present() is None,
         }
 
     def restart_trail(self) -> None:

@@ -79,51 +79,54 @@ def wait_text(page, selector: str, pred, timeout: float = 15.0) -> str:
 
 
 def test_link_row_lidar_fault_speeds_while_lost_and_fault_cleared(tmp_path: pathlib.Path, page) -> None:
-    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=7) as pair:
-        with serve(tmp_path, pair) as server:
-            session = server.runtime.session
-            assert wait_for(lambda: session.last_scan is not None, timeout=10.0)
-            page.goto(server.url + "/")
-            link = wait_text(page, "#st-link", lambda t: t.startswith("ok") and "scan age" in t)
-            assert link.startswith("ok") and page.locator("#st-link.ok-text").count() == 1, link
-            assert "m/s" in text(page, "#st-speed")
+    pair = EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=7)
+    with pair, serve(tmp_path, pair) as server:
+        session = server.runtime.session
+        assert wait_for(lambda: session.last_scan is not None, timeout=10.0)
+        page.goto(server.url + "/")
+        link = wait_text(page, "#st-link", lambda t: t.startswith("ok") and "scan age" in t)
+        assert link.startswith("ok") and page.locator("#st-link.ok-text").count() == 1, link
+        assert "m/s" in text(page, "#st-speed")
 
-            # a silent lidar: the Link row names it and is not green, though the base link is fine
-            assert pair.lidar is not None
-            pair.lidar.faults.stall = True
-            link = wait_text(page, "#st-link", lambda t: "lidar" in t)
-            assert "lidar" in link and page.locator("#st-link.bad-text").count() == 1, link
-            assert session.health()["link"] == "ok"
+        # a silent lidar: the Link row names it and is not green, though the base link is fine
+        assert pair.lidar is not None
+        pair.lidar.faults.stall = True
+        link = wait_text(page, "#st-link", lambda t: "lidar" in t)
+        assert "lidar" in link and page.locator("#st-link.bad-text").count() == 1, link
+        assert session.health()["link"] == "ok"
 
-            # the cause gone and reset: no fault text is left anywhere on the status rows
-            pair.lidar.faults.stall = False
-            assert wait_for(lambda: session.health()["lidar_fault"] is None, timeout=10.0)
-            assert httpx.post(f"{server.url}/api/robot/reset", timeout=10).status_code == 200
-            badge = wait_text(page, "#mode-badge", lambda t: t.lower() == "idle")
-            assert badge.lower() == "idle"  # the badge shows "<mode>: <fault>" while faulted
-            link = wait_text(page, "#st-link", lambda t: "lidar" not in t and t.startswith("ok"))
-            assert "lidar" not in link and page.locator("#st-link.ok-text").count() == 1, link
+        # the cause gone and reset: no fault text is left anywhere on the status rows
+        pair.lidar.faults.stall = False
+        assert wait_for(lambda: session.health()["lidar_fault"] is None, timeout=10.0)
+        # still latched (a reset is the operator's call), but the old cause is no longer shown
+        badge = wait_text(page, "#mode-badge", lambda t: "cause gone" in t.lower()).lower()
+        assert "cause gone" in badge and "lidar" not in badge, badge
+        assert httpx.post(f"{server.url}/api/robot/reset", timeout=10).status_code == 200
+        badge = wait_text(page, "#mode-badge", lambda t: t.lower() == "idle")
+        assert badge.lower() == "idle"  # the badge shows "<mode>: <fault>" while faulted
+        link = wait_text(page, "#st-link", lambda t: "lidar" not in t and t.startswith("ok"))
+        assert "lidar" not in link and page.locator("#st-link.ok-text").count() == 1, link
 
-            # the base link lost: speeds are blank, not the last values
-            pair.base.unplug()
-            speed = wait_text(page, "#st-speed", lambda t: t.startswith("—"))
-            assert speed.startswith("—") and "m/s" not in speed, speed
-            assert text(page, "#st-link").startswith("lost")
-            pair.base.replug()
+        # the base link lost: speeds are blank, not the last values
+        pair.base.unplug()
+        speed = wait_text(page, "#st-speed", lambda t: t.startswith("—"))
+        assert speed.startswith("—") and "m/s" not in speed, speed
+        assert text(page, "#st-link").startswith("lost")
+        pair.base.replug()
 
-            # --no-viewer: the 3D pane says the view is off instead of "Connecting..."
-            frame = page.frame_locator("#viewer")
-            assert "3D view is off" in frame.locator("#viewer-off").inner_text()
+        # --no-viewer: the 3D pane says the view is off instead of "Connecting..."
+        frame = page.frame_locator("#viewer")
+        assert "3D view is off" in frame.locator("#viewer-off").inner_text()
 
 
 def test_base_only_robot_shows_no_lidar(tmp_path: pathlib.Path, page) -> None:
-    with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=8, lidar=False) as pair:
-        with serve(tmp_path, pair) as server:
-            page.goto(server.url + "/")
-            link = wait_text(page, "#st-link", lambda t: "no lidar" in t)
-            assert "no lidar (base only)" in link and page.locator("#st-link.ok-text").count() == 1
-            # mapping and navigation buttons are disabled: the server offers neither mode
-            for mode in ("mapping", "navigating"):
-                for button in page.locator(f"[data-mode='{mode}']").all():
-                    assert button.is_disabled()
-            assert page.locator("[data-mode='teleop']").first.is_enabled()
+    pair = EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=8, lidar=False)
+    with pair, serve(tmp_path, pair) as server:
+        page.goto(server.url + "/")
+        link = wait_text(page, "#st-link", lambda t: "no lidar" in t)
+        assert "no lidar (base only)" in link and page.locator("#st-link.ok-text").count() == 1
+        # mapping and navigation buttons are disabled: the server offers neither mode
+        for mode in ("mapping", "navigating"):
+            for button in page.locator(f"[data-mode='{mode}']").all():
+                assert button.is_disabled()
+        assert page.locator("[data-mode='teleop']").first.is_enabled()

@@ -21,7 +21,8 @@ function render(t) {
   state.mode = t.mode;
   state.allowed = t.allowed_modes || [];
   const badge = $("#mode-badge");
-  badge.textContent = t.mode + (t.fault ? `: ${t.fault}` : "");
+  const cleared = t.health && t.health.fault_cleared; // latched, cause gone: not a present fault
+  badge.textContent = t.mode + (t.fault ? (cleared ? ": cause gone, press Reset" : `: ${t.fault}`) : "");
   badge.className = `badge mode-${t.mode}`;
   $("#st-mode").textContent = t.mode;
   const nav = t.navigation || null;
