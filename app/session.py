@@ -447,7 +447,8 @@ class Session:
             self.add_event("collision", pose=[self.pose.x, self.pose.y, self.pose.theta])
         self.link_state, self.link_reason = frame.link.state, frame.link.reason
         # garbage before silence: withheld garbage scans also make the lidar look silent after a while
-        self.lidar_fault = self.fault_monitor.lidar_reason() or self._lidar_silence(now)  # present cause
+        # what is wrong with the lidar now: the driver's word, garbage or stuck frames, silence
+        self.lidar_fault = frame.lidar_fault or self.fault_monitor.lidar_reason() or self._lidar_silence(now)
         fault = frame.fault or self.fault_monitor.lidar_reason() or self._fault_condition(now) or motion_fault
         if fault is not None and self.fault is None:
             self._enter_fault(fault)

@@ -68,6 +68,7 @@ class SensorFrame:
     base_stopped_by_obstacle: bool = False  # the base's own (firmware / sim) obstacle stop
     collision: bool = False  # simulator only: the body touched an obstacle this step
     fault: str | None = None  # a driver-level fault (lidar health error, port gone, ...)
+    lidar_fault: str | None = None  # the lidar's part of ``fault`` (the status Link row shows it)
 
 
 @runtime_checkable

@@ -523,10 +523,12 @@ class SerialDriver:
                 faults.append("base reports an IMU fault")
         faults.extend(errors)
         scan = None
+        lidar_fault = None
         if self._lidar is not None:
             scan = self._lidar.take_scan()
-            if self._lidar.fault:
-                faults.append(self._lidar.fault)
+            lidar_fault = self._lidar.fault
+            if lidar_fault:
+                faults.append(lidar_fault)
         return SensorFrame(
             stamp=now,
             scan=scan,
@@ -537,6 +539,7 @@ class SerialDriver:
             link=link,
             base_stopped_by_obstacle=stopped,
             fault="; ".join(faults) if faults else None,
+            lidar_fault=lidar_fault or None,
         )
 
     def command(self, cmd: Twist2D) -> None:
