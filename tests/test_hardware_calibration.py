@@ -27,7 +27,7 @@ from robot.calibration import (
 from robot.profiles import PROFILE_DIR, load_profile, profile_from_dict
 from robot.serial.emulate import EmulatorPair
 from robot.serial.port import open_port
-from robot.serial.protocol import ParamId, ParamSet
+from robot.serial.protocol import ParamId, ParamSave, ParamSet
 
 TRUE = load_profile("skid4")
 OMNI = load_profile("omni4")
@@ -261,13 +261,20 @@ def test_calibrate_over_serial_recovers_a_wrong_wheel_radius(tmp_path: Path, mon
         # --set-firmware wrote the corrected values into the base's parameters
         assert pair.base.params[1] == pytest.approx(cal.wheel_radius, rel=1e-4)
         assert pair.base.params[2] == pytest.approx(cal.track_width, rel=1e-4)
+        # ... and, --yes answering the second question too, saved them to flash (PARAM_SAVE)
+        assert pair.base.flash is not None
+        assert pair.base.flash[1] == pytest.approx(cal.wheel_radius, rel=1e-4)
+        assert "now survive a reboot" in printed.out
 
 
-def test_set_firmware_asks_before_any_write_and_says_values_do_not_survive_a_reboot(
-    tmp_path: Path, monkeypatch, capsys
+@pytest.mark.parametrize("answers", [("n", None), ("y", "n"), ("y", "y")])
+def test_set_firmware_asks_before_any_write_and_before_saving_to_flash(
+    tmp_path: Path, monkeypatch, capsys, answers: tuple[str, str | None]
 ) -> None:
-    """Issue 23 item 3: without --yes, "no" to the firmware question leaves the base untouched (no
-    PARAM_SET reached it), and the note says PARAM_SET values are lost on a reboot."""
+    """Issue 23 item 3: without --yes, nothing reaches the base before the operator says yes to the
+    firmware question; the note says PARAM_SET values do not survive a reboot unless saved; a second
+    question offers PARAM_SAVE, and only a yes writes the flash."""
+    write, save = answers
     with EmulatorPair(TRUE, world="box", link_dir=tmp_path / "dev", lidar=False, seed=2) as pair:
         prompts: list[str] = []
 
@@ -276,26 +283,44 @@ def test_set_firmware_asks_before_any_write_and_says_values_do_not_survive_a_reb
             if prompt.startswith("Write the corrected profile"):
                 return "y"
             if "firmware parameters" in prompt:
-                assert not [m for _, m in pair.base.message_log if isinstance(m, ParamSet)]
-                return "n"
+                assert not [m for _, m in pair.base.message_log if isinstance(m, ParamSet | ParamSave)]
+                return write
+            if "(PARAM_SAVE)" in prompt:
+                assert save is not None, "asked to save what was not written"
+                assert not [m for _, m in pair.base.message_log if isinstance(m, ParamSave)]
+                return save
+            if prompt.startswith("Measured"):
+                return tape.answer(prompt)
             return ""  # Enter at the "put the robot on a mark" prompts
 
+        tape = TruthTape(pair)
         monkeypatch.setattr("builtins.input", operator)
         pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
         out = tmp_path / "wheelie.toml"
         before = dict(pair.base.params)
         url = pair.url() + "?link_timeout=1.0"
         argv = ["calibrate", "--robot", url, "--profile", str(wrong_toml(tmp_path))]
-        argv += ["--distance", "0.3", "--speed", "0.25", "--turns", "0.5", "--turn-speed", "1.0"]
-        argv += ["--measured-distance", "0.3", "--gyro-turns", "--write", str(out), "--set-firmware"]
-        rc = main(argv)
+        argv += ["--distance", "0.5", "--speed", "0.25", "--turns", "0.6", "--turn-speed", "1.0"]
+        argv += ["--write", str(out), "--set-firmware"]
+        try:
+            rc = main(argv)
+        finally:
+            tape.close()
         printed = capsys.readouterr()
         assert rc == 0, printed.err
         assert any("firmware parameters" in p for p in prompts), prompts
         assert any("Write the corrected profile" in p for p in prompts), (prompts, printed.out)
-        assert not [m for _, m in pair.base.message_log if isinstance(m, ParamSet)]
-        assert pair.base.params == before
-        assert "lost when the base reboots" in printed.out and "firmware not changed" in printed.out
+        assert "unless they are saved with PARAM_SAVE" in printed.out
+        sent = [m for _, m in pair.base.message_log]
+        if write == "n":
+            assert not [m for m in sent if isinstance(m, ParamSet | ParamSave)]
+            assert pair.base.params == before and "firmware not changed" in printed.out
+        else:
+            assert pair.base.params[ParamId.WHEEL_RADIUS] != before[ParamId.WHEEL_RADIUS]
+        if save == "y":
+            assert pair.base.flash == pair.base.params and "now survive a reboot" in printed.out
+        else:
+            assert pair.base.flash is None and not [m for m in sent if isinstance(m, ParamSave)]
         assert load_profile(out).name == "wheelie"  # the written profile is no longer "skid4"
 
 

@@ -57,7 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument(
         "--set-firmware",
         action="store_true",
-        help="serial only: also PARAM_SET the new values (asks first; they last until the base reboots)",
+        help="serial only: also PARAM_SET the new values, then PARAM_SAVE them to flash (asks before each)",
     )
     p.add_argument("--yes", "-y", action="store_true", help="no confirmations (automation)")
     p.set_defaults(func=run)
@@ -158,19 +158,25 @@ def run(args: argparse.Namespace) -> int:
 
 
 FIRMWARE_PERSISTENCE = (
-    "PARAM_SET values live in the base's RAM: they are lost when the base reboots or is reflashed"
-    " (the protocol has no save-to-flash message), so the profile file is what keeps them"
+    "PARAM_SET values live in the base's RAM: a reboot brings back the values last saved to flash"
+    " (or the firmware defaults) unless they are saved with PARAM_SAVE"
 )
 
 
 def _write_firmware(rig: _Rig, values: dict[str, float], ask: _Asker) -> None:
-    """PARAM_SET the corrected values, after the operator said yes (``--yes`` counts as yes)."""
+    """PARAM_SET the corrected values, then PARAM_SAVE them to flash, each after the operator said
+    yes (``--yes`` answers yes to both). Nothing reaches the base before the first yes."""
     listing = ", ".join(f"{k} = {v:.5f}" for k, v in values.items())
     print(f"note: {FIRMWARE_PERSISTENCE}")
     if not ask.yes and not ask.confirm(f"Write {listing} into the base's firmware parameters?"):
         print("firmware not changed")
         return
     rig.set_firmware(values)
+    save = "Save them to the base's flash so they survive a reboot (PARAM_SAVE)?"
+    if not ask.yes and not ask.confirm(save):
+        print("not saved to flash: the base goes back to its saved values at the next reboot")
+        return
+    rig.save_firmware()
 
 
 class _Asker:
@@ -373,6 +379,14 @@ class _Rig:
             except Exception as exc:  # a timeout or a refusal: the profile is still written
                 raise CliError(f"firmware parameter {name}: {exc}") from None
             print(f"firmware {name} = {reply.value:.5f}")
+
+    def save_firmware(self) -> None:
+        try:
+            reply = self.driver.save_params()
+        except Exception as exc:  # no answer (older firmware) or a flash error: the profile is still written
+            print(f"warning: firmware parameters not saved to flash: {exc}", file=sys.stderr)
+            return
+        print(f"saved {int(reply.value)} firmware parameters to flash: they now survive a reboot")
 
     def close(self) -> None:
         try:

@@ -31,11 +31,13 @@ from robot.profiles import RobotProfile
 from robot.serial.port import Backoff, PortUnavailableError, SerialLinkError, describe_crash, open_port
 from robot.serial.protocol import (
     ENCODER_CHANNELS,
+    PARAM_SAVE_ID,
     ErrorCode,
     ErrorReport,
     EStop,
     Heartbeat,
     MessageDecoder,
+    ParamSave,
     ParamSet,
     ParamStatus,
     ParamValue,
@@ -558,23 +560,39 @@ class SerialDriver:
         self._base.send(Reset(ResetMode.CLEAR_ESTOP))
 
     def set_param(self, param_id: int, value: float, timeout: float = 1.0) -> ParamValue:
-        """Write a firmware parameter (PARAM_SET) and wait for the base's PARAM_VALUE answer.
+        """Write a firmware parameter (PARAM_SET) and wait for the base's PARAM_VALUE answer. The value
+        lives in the base's RAM until ``save_params``.
 
         Raises ``SerialLinkError`` when no answer comes within ``timeout`` s or the base refuses."""
-        base = self._base
-        with base._lock:
-            base.params.pop(int(param_id), None)
-        if not base.send(ParamSet(int(param_id), float(value))):
-            raise SerialLinkError(f"cannot send parameter {param_id}: base port {self.options.port} is gone")
-        end = time.monotonic() + timeout
-        while (reply := base.params.get(int(param_id))) is None:
-            if time.monotonic() > end:
-                raise SerialLinkError(f"the base did not answer PARAM_SET {param_id} within {timeout:.1f} s")
-            time.sleep(0.005)
+        reply = self._ask_param(ParamSet(int(param_id), float(value)), int(param_id), timeout)
         if reply.status != ParamStatus.OK:
             raise SerialLinkError(
                 f"the base refused parameter {param_id} = {value:g}: {ParamStatus(reply.status).name}"
             )
+        return reply
+
+    def save_params(self, timeout: float = 2.0) -> ParamValue:
+        """PARAM_SAVE: the base writes every parameter now in effect to flash, so they survive a
+        reboot; its answer's ``value`` is the number written. Raises ``SerialLinkError`` when it does
+        not answer (a firmware without PARAM_SAVE) or the flash write failed."""
+        reply = self._ask_param(ParamSave(), PARAM_SAVE_ID, timeout)
+        if reply.status != ParamStatus.OK:
+            raise SerialLinkError(f"the base could not write its flash: {ParamStatus(reply.status).name}")
+        return reply
+
+    def _ask_param(self, msg: ParamSet | ParamSave, answer_id: int, timeout: float) -> ParamValue:
+        """Send ``msg`` and wait for the PARAM_VALUE answer carrying ``answer_id``."""
+        base = self._base
+        what = f"{msg.TYPE.name} {answer_id}" if isinstance(msg, ParamSet) else msg.TYPE.name
+        with base._lock:
+            base.params.pop(answer_id, None)
+        if not base.send(msg):
+            raise SerialLinkError(f"cannot send {what}: base port {self.options.port} is gone")
+        end = time.monotonic() + timeout
+        while (reply := base.params.get(answer_id)) is None:
+            if time.monotonic() > end:
+                raise SerialLinkError(f"the base did not answer {what} within {timeout:.1f} s")
+            time.sleep(0.005)
         return reply
 
     @property
