@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.types import ZERO_TWIST, Pose2D, Twist2D
+from nav.walkers import PERSON_MAX_SPEED, WalkerTracker
 from robot.base import SensorFrame
 from robot.kinematics import integrate_twist, se2_exp
 from robot.profiles import RobotProfile
@@ -48,15 +49,6 @@ SWEEP_STEP = 0.02
 approach check (a
 0.51 x 0.43 m base turning at 1.8 rad/s moves a corner 6 cm per 0.1 s ``simulation_time_step``,
 enough to pass a post's few readings between two checked poses)."""
-
-PERSON_MAX_SPEED = 1.5
-"""m/s; fastest walker the approach check predicts (faster apparent motion is a mismatch)."""
-PERSON_MIN_SPEED = 0.2
-"""m/s; slower apparent motion of a cluster is taken for noise (a static object)."""
-PERSON_MAX_EXTENT = 0.7
-"""m; a cluster of returns wider than this is a wall or furniture, not a person."""
-CLUSTER_GAP = 0.15
-"""m; consecutive returns farther apart than this belong to different objects."""
 
 COMMAND_GAP = 0.25
 """s; a longer pause between calls means the robot was stopped without the filter (see ``_ingest``)."""
@@ -197,9 +189,8 @@ class SafetyFilter:
         # state between frames
         self._scan_pts = np.zeros((0, 2))  # base_link at the scan's stamp
         self._scan_vel = np.zeros((0, 2))  # predicted velocity of each reading, same frame
-        # person-sized clusters of the previous scan: centroids (base at its stamp) and the stamp
-        self._clusters = np.zeros((0, 2))
-        self._clusters_stamp = -math.inf
+        # walkers between scans (base frame at each scan's stamp)
+        self.walkers = WalkerTracker()
         # walkers are followed this far: within the approach horizon they can reach the footprint
         self._track_reach = self._reach + PERSON_MAX_SPEED * o.time_before_collision
         self._scan_stamp = -math.inf
@@ -240,7 +231,7 @@ class SafetyFilter:
             ang = scan.angles[ok]
             pts = np.column_stack((r[ok] * np.cos(ang), r[ok] * np.sin(ang)))
             pts = self._mount.transform_points(pts) if pts.size else np.zeros((0, 2))
-            vel = self._walker_velocities(pts, scan.stamp)
+            vel = self.walkers.update(pts, scan.stamp, self._scan_shift.inverse())
             keep = (np.hypot(pts[:, 0], pts[:, 1]) <= self._scan_reach) | vel.any(axis=1)
             self._scan_pts, self._scan_vel = pts[keep], vel[keep]
             self._scan_stamp = scan.stamp
@@ -258,37 +249,6 @@ class SafetyFilter:
             self._ir_src = k
             self._ir_stamp = ir.stamp
             self._ir_shift = Pose2D()
-
-    def _walker_velocities(self, pts: np.ndarray, stamp: float) -> np.ndarray:
-        """Predicted velocity (N, 2) of each of a scan's readings (base at ``stamp``, beam order):
-        zero except for person-sized clusters (consecutive returns less than ``CLUSTER_GAP`` apart,
-        at most ``PERSON_MAX_EXTENT`` wide) whose centroid moved, against the nearest such cluster
-        of the previous scan (moved by the robot's own motion since), at a walking speed. Constant
-        velocity, as teb_local_planner's and collision_monitor's dynamic obstacles."""
-        vel = np.zeros_like(pts)
-        if pts.shape[0] == 0:
-            self._clusters, self._clusters_stamp = np.zeros((0, 2)), stamp
-            return vel
-        label = np.concatenate(([0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T) > CLUSTER_GAP)))
-        count = np.bincount(label)
-        centre = (
-            np.column_stack((np.bincount(label, pts[:, 0]), np.bincount(label, pts[:, 1]))) / count[:, None]
-        )
-        first = np.searchsorted(label, np.arange(len(count)))
-        last = np.searchsorted(label, np.arange(len(count)), side="right") - 1
-        extent = np.hypot(*(pts[last] - pts[first]).T)
-        person = (count >= 3) & (extent <= PERSON_MAX_EXTENT)
-        dt = stamp - self._clusters_stamp
-        prev = self._scan_shift.inverse().transform_points(self._clusters) if self._clusters.size else None
-        if prev is not None and 0.0 < dt <= 1.0 and person.any():
-            d = np.hypot(centre[:, None, 0] - prev[None, :, 0], centre[:, None, 1] - prev[None, :, 1])
-            j = d.argmin(axis=1)
-            v = (centre - prev[j]) / dt
-            speed = np.hypot(v[:, 0], v[:, 1])
-            walking = person & (speed >= PERSON_MIN_SPEED) & (speed <= PERSON_MAX_SPEED)
-            vel = np.where(walking[label][:, None], v[label], 0.0)
-        self._clusters, self._clusters_stamp = centre[person], stamp
-        return vel
 
     def _readings(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Readings in the current base frame near the robot: points (N, 2), weights (N,), source
