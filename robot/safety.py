@@ -50,6 +50,10 @@ approach check (a
 0.51 x 0.43 m base turning at 1.8 rad/s moves a corner 6 cm per 0.1 s ``simulation_time_step``,
 enough to pass a post's few readings between two checked poses)."""
 
+DEEPEN_TOL = 0.001
+"""m; a reading already inside the footprint blocks a motion that takes it deeper than this (the
+simulator's ``contact_skin`` is 2 mm: a motion it refuses must not be offered as free)."""
+
 COMMAND_GAP = 0.25
 """s; a longer pause between calls means the robot was stopped without the filter (see ``_ingest``)."""
 
@@ -440,10 +444,12 @@ class SafetyFilter:
         vel: np.ndarray | None = None,
     ) -> tuple[float | None, int]:
         """First simulated time at which >= min_points readings fall inside the moved footprint
-        (readings already inside are left to the stop zone; walkers' readings move on at their
-        predicted velocity ``vel``), and the index of one of them."""
+        (walkers' readings move on at their predicted velocity ``vel``), and the index of one of
+        them. A reading already inside counts only once the motion takes it deeper than now by
+        more than ``DEEPEN_TOL``, the simulator's rule for a body in contact: a turn or a backing
+        away that frees the footprint passes, one that presses a touching leg in does not."""
         o = self.options
-        cand = ~inside_now
+        cand = np.ones(pts.shape[0], dtype=bool)
         speed = math.hypot(twist.vx, twist.vy)
         reach = self._reach_fp + speed * o.time_before_collision + 1e-6
         r = np.hypot(pts[:, 0], pts[:, 1])
@@ -470,6 +476,26 @@ class SafetyFilter:
             c, s = np.cos(th), np.sin(th)
             local = np.stack((c[:, None] * dx + s[:, None] * dy, -s[:, None] * dx + c[:, None] * dy), axis=-1)
             hit = _inside(local, self._a, self._e)  # (K, N)
+        was_in = inside_now[cand]
+        if was_in.any():
+            # depth of the readings inside now, at rest and along the robot's motion (their own
+            # predicted motion left out: a walker stepping in must not pin the robot)
+            q = p[was_in]
+            qx, qy = q[None, :, 0] - ex[:, None], q[None, :, 1] - ey[:, None]
+            if self._circle is not None:
+                deeper = (
+                    self._circle - np.hypot(qx, qy) > self._circle - np.hypot(q[:, 0], q[:, 1]) + DEEPEN_TOL
+                )
+            else:
+                c, s = np.cos(th), np.sin(th)
+                moved = np.stack(
+                    (c[:, None] * qx + s[:, None] * qy, -s[:, None] * qx + c[:, None] * qy), axis=-1
+                )
+                depth0, _ = _boundary_distance(q, self._a, self._e, self._inv)
+                depth, _ = _boundary_distance(moved.reshape(-1, 2), self._a, self._e, self._inv)
+                inside = _inside(moved, self._a, self._e)
+                deeper = inside & (depth.reshape(inside.shape) > depth0[None, :] + DEEPEN_TOL)
+            hit[:, was_in] = deeper
         count = (hit * wc[None, :]).sum(axis=1)
         k = np.flatnonzero(count >= o.min_points)
         if k.size == 0:

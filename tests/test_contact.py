@@ -420,3 +420,29 @@ def test_walker_tracker_follows_a_person_sized_cluster() -> None:
     tr = WalkerTracker()
     tr.update(wall, 0.0)
     assert not tr.update(wall - [0.1, 0.0], 0.1).any()
+
+
+def points_scan(stamp: float, pts: np.ndarray, beams: int = 3600) -> LaserScan:
+    """A scan (laser at base_link) with one return at each of the (N, 2) points."""
+    r = np.full(beams, np.inf)
+    inc = 2 * math.pi / beams
+    k = np.round((np.arctan2(pts[:, 1], pts[:, 0]) + math.pi) / inc).astype(int) % beams
+    r[k] = np.hypot(pts[:, 0], pts[:, 1])
+    return LaserScan(stamp, -math.pi, inc, r, 0.15, 6.0)
+
+
+def test_a_turn_that_presses_a_touching_leg_in_is_neither_offered_nor_passed() -> None:
+    """A chair leg 2 mm inside the front edge of a 0.51 x 0.43 m base (pressed in within the
+    simulator's contact skin): turning right takes it deeper (the simulator refuses that turn),
+    turning left frees it. The dashboard's ``free`` list offers only the left turn and the filter
+    stops the right one; readings inside the footprint used to be ignored by the turn check, so
+    both turns were offered and the right one never moved the robot."""
+    leg = np.column_stack((np.full(4, 0.253), np.linspace(0.15, 0.18, 4)))
+    f = SafetyFilter(big_skid())
+    f(Twist2D(), SensorFrame(stamp=0.0, scan=points_scan(0.0, leg)))
+    free = f.free_motions(0.0)
+    assert free["turn left"] and not free["turn right"] and not free["forward"] and free["back"]
+    right, reason = f(Twist2D(0.0, 0.0, -0.8), SensorFrame(stamp=0.05))
+    assert abs(right.wz) < 0.1 and reason is not None
+    left, _ = f(Twist2D(0.0, 0.0, 0.8), SensorFrame(stamp=0.1))
+    assert left.wz > 0.7
