@@ -19,7 +19,9 @@ Three zones, as collision_monitor's polygons, all derived from the robot's footp
   ``SWEEP_STEP`` between two poses: the swept footprint of a turn, not just its ends) up to
   ``time_before_collision``; if readings would enter it at time
   t_c, the twist is scaled by t_c / time_before_collision so that the collision is never nearer
-  than that horizon (collision_monitor's ``approach`` action).
+  than that horizon (collision_monitor's ``approach`` action). A reading already inside the
+  footprint counts once the motion takes it ``DEEPEN_TOL`` deeper (the simulator's contact rule:
+  leave, never press in).
 
 Readings: the latest lidar scan (a frame often carries none: the lidar runs at 5.5-10 Hz, the loop
 at 20 Hz) moved into the current base frame by the filter's own output twists since the scan's stamp
