@@ -19,7 +19,9 @@ Three zones, as collision_monitor's polygons, all derived from the robot's footp
   ``SWEEP_STEP`` between two poses: the swept footprint of a turn, not just its ends) up to
   ``time_before_collision``; if readings would enter it at time
   t_c, the twist is scaled by t_c / time_before_collision so that the collision is never nearer
-  than that horizon (collision_monitor's ``approach`` action).
+  than that horizon (collision_monitor's ``approach`` action). A reading already inside the
+  footprint counts once the motion takes it ``DEEPEN_TOL`` deeper (the simulator's contact rule:
+  leave, never press in).
 
 Readings: the latest lidar scan (a frame often carries none: the lidar runs at 5.5-10 Hz, the loop
 at 20 Hz) moved into the current base frame by the filter's own output twists since the scan's stamp
@@ -40,6 +42,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.types import ZERO_TWIST, Pose2D, Twist2D
+from nav.walkers import PERSON_MAX_SPEED, WalkerTracker
 from robot.base import SensorFrame
 from robot.kinematics import integrate_twist, se2_exp
 from robot.profiles import RobotProfile
@@ -50,14 +53,9 @@ approach check (a
 0.51 x 0.43 m base turning at 1.8 rad/s moves a corner 6 cm per 0.1 s ``simulation_time_step``,
 enough to pass a post's few readings between two checked poses)."""
 
-PERSON_MAX_SPEED = 1.5
-"""m/s; fastest walker the approach check predicts (faster apparent motion is a mismatch)."""
-PERSON_MIN_SPEED = 0.2
-"""m/s; slower apparent motion of a cluster is taken for noise (a static object)."""
-PERSON_MAX_EXTENT = 0.7
-"""m; a cluster of returns wider than this is a wall or furniture, not a person."""
-CLUSTER_GAP = 0.15
-"""m; consecutive returns farther apart than this belong to different objects."""
+DEEPEN_TOL = 0.001
+"""m; a reading already inside the footprint blocks a motion that takes it deeper than this (the
+simulator's ``contact_skin`` is 2 mm: a motion it refuses must not be offered as free)."""
 
 COMMAND_GAP = 0.25
 """s; a longer pause between calls means the robot was stopped without the filter (see ``_ingest``)."""
@@ -203,9 +201,8 @@ class SafetyFilter:
         # state between frames
         self._scan_pts = np.zeros((0, 2))  # base_link at the scan's stamp
         self._scan_vel = np.zeros((0, 2))  # predicted velocity of each reading, same frame
-        # person-sized clusters of the previous scan: centroids (base at its stamp) and the stamp
-        self._clusters = np.zeros((0, 2))
-        self._clusters_stamp = -math.inf
+        # walkers between scans (base frame at each scan's stamp)
+        self.walkers = WalkerTracker()
         # walkers are followed this far: within the approach horizon they can reach the footprint
         self._track_reach = self._reach + PERSON_MAX_SPEED * o.time_before_collision
         self._scan_stamp = -math.inf
@@ -246,7 +243,7 @@ class SafetyFilter:
             ang = scan.angles[ok]
             pts = np.column_stack((r[ok] * np.cos(ang), r[ok] * np.sin(ang)))
             pts = self._mount.transform_points(pts) if pts.size else np.zeros((0, 2))
-            vel = self._walker_velocities(pts, scan.stamp)
+            vel = self.walkers.update(pts, scan.stamp, self._scan_shift.inverse())
             keep = (np.hypot(pts[:, 0], pts[:, 1]) <= self._scan_reach) | vel.any(axis=1)
             self._scan_pts, self._scan_vel = pts[keep], vel[keep]
             self._scan_stamp = scan.stamp
@@ -264,37 +261,6 @@ class SafetyFilter:
             self._ir_src = k
             self._ir_stamp = ir.stamp
             self._ir_shift = Pose2D()
-
-    def _walker_velocities(self, pts: np.ndarray, stamp: float) -> np.ndarray:
-        """Predicted velocity (N, 2) of each of a scan's readings (base at ``stamp``, beam order):
-        zero except for person-sized clusters (consecutive returns less than ``CLUSTER_GAP`` apart,
-        at most ``PERSON_MAX_EXTENT`` wide) whose centroid moved, against the nearest such cluster
-        of the previous scan (moved by the robot's own motion since), at a walking speed. Constant
-        velocity, as teb_local_planner's and collision_monitor's dynamic obstacles."""
-        vel = np.zeros_like(pts)
-        if pts.shape[0] == 0:
-            self._clusters, self._clusters_stamp = np.zeros((0, 2)), stamp
-            return vel
-        label = np.concatenate(([0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T) > CLUSTER_GAP)))
-        count = np.bincount(label)
-        centre = (
-            np.column_stack((np.bincount(label, pts[:, 0]), np.bincount(label, pts[:, 1]))) / count[:, None]
-        )
-        first = np.searchsorted(label, np.arange(len(count)))
-        last = np.searchsorted(label, np.arange(len(count)), side="right") - 1
-        extent = np.hypot(*(pts[last] - pts[first]).T)
-        person = (count >= 3) & (extent <= PERSON_MAX_EXTENT)
-        dt = stamp - self._clusters_stamp
-        prev = self._scan_shift.inverse().transform_points(self._clusters) if self._clusters.size else None
-        if prev is not None and 0.0 < dt <= 1.0 and person.any():
-            d = np.hypot(centre[:, None, 0] - prev[None, :, 0], centre[:, None, 1] - prev[None, :, 1])
-            j = d.argmin(axis=1)
-            v = (centre - prev[j]) / dt
-            speed = np.hypot(v[:, 0], v[:, 1])
-            walking = person & (speed >= PERSON_MIN_SPEED) & (speed <= PERSON_MAX_SPEED)
-            vel = np.where(walking[label][:, None], v[label], 0.0)
-        self._clusters, self._clusters_stamp = centre[person], stamp
-        return vel
 
     def _readings(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Readings in the current base frame near the robot: points (N, 2), weights (N,), source
@@ -486,10 +452,12 @@ class SafetyFilter:
         vel: np.ndarray | None = None,
     ) -> tuple[float | None, int]:
         """First simulated time at which >= min_points readings fall inside the moved footprint
-        (readings already inside are left to the stop zone; walkers' readings move on at their
-        predicted velocity ``vel``), and the index of one of them."""
+        (walkers' readings move on at their predicted velocity ``vel``), and the index of one of
+        them. A reading already inside counts only once the motion takes it deeper than now by
+        more than ``DEEPEN_TOL``, the simulator's rule for a body in contact: a turn or a backing
+        away that frees the footprint passes, one that presses a touching leg in does not."""
         o = self.options
-        cand = ~inside_now
+        cand = np.ones(pts.shape[0], dtype=bool)
         speed = math.hypot(twist.vx, twist.vy)
         reach = self._reach_fp + speed * o.time_before_collision + 1e-6
         r = np.hypot(pts[:, 0], pts[:, 1])
@@ -516,6 +484,26 @@ class SafetyFilter:
             c, s = np.cos(th), np.sin(th)
             local = np.stack((c[:, None] * dx + s[:, None] * dy, -s[:, None] * dx + c[:, None] * dy), axis=-1)
             hit = _inside(local, self._a, self._e)  # (K, N)
+        was_in = inside_now[cand]
+        if was_in.any():
+            # depth of the readings inside now, at rest and along the robot's motion (their own
+            # predicted motion left out: a walker stepping in must not pin the robot)
+            q = p[was_in]
+            qx, qy = q[None, :, 0] - ex[:, None], q[None, :, 1] - ey[:, None]
+            if self._circle is not None:
+                deeper = (
+                    self._circle - np.hypot(qx, qy) > self._circle - np.hypot(q[:, 0], q[:, 1]) + DEEPEN_TOL
+                )
+            else:
+                c, s = np.cos(th), np.sin(th)
+                moved = np.stack(
+                    (c[:, None] * qx + s[:, None] * qy, -s[:, None] * qx + c[:, None] * qy), axis=-1
+                )
+                depth0, _ = _boundary_distance(q, self._a, self._e, self._inv)
+                depth, _ = _boundary_distance(moved.reshape(-1, 2), self._a, self._e, self._inv)
+                inside = _inside(moved, self._a, self._e)
+                deeper = inside & (depth.reshape(inside.shape) > depth0[None, :] + DEEPEN_TOL)
+            hit[:, was_in] = deeper
         count = (hit * wc[None, :]).sum(axis=1)
         k = np.flatnonzero(count >= o.min_points)
         if k.size == 0:

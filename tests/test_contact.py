@@ -5,6 +5,7 @@ rotation checks the swept footprint, not only its end pose."""
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import math
 
@@ -15,7 +16,7 @@ from conftest import make_settings
 from app.commands.sim_nav import build_sim_stack
 from nav.behaviors.base import BehaviorContext, Status
 from nav.behaviors.spin import Spin, SpinOptions
-from nav.control.errors import NoValidControl
+from nav.control.errors import ControllerError, NoValidControl
 from nav.control.footprint import swept_poses, swept_turn
 from nav.control.teb import TebController, centre_collisions
 from nav.control.teb_options import TebOptions
@@ -297,7 +298,7 @@ def test_safety_predicts_a_walker_coming_head_on() -> None:
     assert h(cmd, SensorFrame(stamp=0.1, scan=person_scan(0.1, 1.0, 0.6))) == (cmd, None)
 
 
-@pytest.mark.parametrize("seed", [0, 2])
+@pytest.mark.parametrize("seed", [0, 2, 4])
 def test_teb_meets_a_walker_in_a_greenhouse_aisle_without_contact(seed: int) -> None:
     """TEB drives down a 1.2 m greenhouse aisle (safety layer on, as the server wires it) while a
     walker comes the other way along it, off-centre by up to 0.3 m at 0.6-1.2 m/s: they meet
@@ -329,3 +330,119 @@ def test_teb_meets_a_walker_in_a_greenhouse_aisle_without_contact(seed: int) -> 
         assert moving_contacts == 0
     finally:
         s.close()
+
+
+# ---------------------------------------------------------------- TEB: walkers as dynamic obstacles
+def corridor_teb() -> tuple[TebController, Costmap]:
+    """TEB (0.51 x 0.43 m base) on a free 4 x 3 m costmap, path straight along y = 1.5."""
+    teb = TebController(TebOptions(footprint=tuple(map(tuple, BIG.tolist()))))
+    costmap = Costmap(GridGeometry(0.05, 80, 60), np.zeros((60, 80), np.uint8))
+    teb.set_path(Path(np.array([[0.5 + 0.1 * k, 1.5, 0.0] for k in range(31)])))
+    return teb, costmap
+
+
+def test_teb_waits_for_a_walker_coming_head_on() -> None:
+    """A walker 1.6 m ahead walking at the robot at 1 m/s: TEB's band waits (its first segment
+    nearly at rest) and the command slows down, or TEB stops outright; the same walker standing
+    still there (no predicted motion: room for 1 m of travel), or no walker, and it speeds up."""
+    pose, v = Pose2D(0.5, 1.5, 0.0), Twist2D(0.2, 0.0, 0.0)
+    teb, costmap = corridor_teb()
+    cmd, _ = teb.compute(pose, v, costmap)
+    assert cmd.vx >= v.vx
+    teb, costmap = corridor_teb()
+    teb.set_walkers(np.array([[2.1, 1.5]]), np.zeros((1, 2)))
+    cmd, _ = teb.compute(pose, v, costmap)
+    assert cmd.vx >= v.vx
+    teb, costmap = corridor_teb()
+    teb.set_walkers(np.array([[2.1, 1.5]]), np.array([[-1.0, 0.0]]))
+    try:
+        cmd, debug = teb.compute(pose, v, costmap)
+    except NoValidControl as exc:
+        assert "walker" in str(exc)
+    else:
+        assert cmd.vx < v.vx and debug.velocities[0, 0] < 0.1
+
+
+def test_teb_band_keeps_clear_of_a_walkers_predicted_positions() -> None:
+    """A walker crossing the corridor ahead (1 m/s along +y) passes the path where the band
+    would be ~1 s later: the optimized band keeps the footprint's circle off the walker's body at
+    every pose's own time (TEB's EdgeDynamicObstacle), where without the walker it runs straight
+    through that place and time."""
+    from nav.walkers import PERSON_RADIUS
+
+    pose, v = Pose2D(0.5, 1.5, 0.0), Twist2D(0.3, 0.0, 0.0)
+    start, vel = np.array([[1.1, 0.3]]), np.array([[0.0, 1.0]])
+
+    def gaps(teb: TebController) -> np.ndarray:
+        dbg = teb.last_debug
+        t = np.concatenate(([0.0], np.cumsum(dbg.dts)))
+        at = start + vel * t[:, None]
+        return np.hypot(*(at - dbg.band[:, :2]).T) - PERSON_RADIUS
+
+    teb, costmap = corridor_teb()
+    teb.compute(pose, v, costmap)
+    blind = gaps(teb).min()
+    teb, costmap = corridor_teb()
+    teb.set_walkers(start, vel)
+    with contextlib.suppress(NoValidControl):
+        teb.compute(pose, v, costmap)
+    seen = gaps(teb).min()
+    assert blind < teb._radius  # without prediction the band meets the walker
+    assert seen > blind + 0.1
+
+
+def test_teb_rejects_bad_walkers() -> None:
+    teb, _ = corridor_teb()
+    with pytest.raises(ControllerError):
+        teb.set_walkers(np.array([[1.0, np.nan]]), np.zeros((1, 2)))
+    with pytest.raises(ControllerError):
+        teb.set_walkers(np.zeros((2, 2)), np.zeros((1, 2)))
+
+
+def test_walker_tracker_follows_a_person_sized_cluster() -> None:
+    """A 0.3 m disc moving 0.1 m between scans 0.1 s apart is a walker at 1 m/s; a wall-sized
+    cluster moving the same is not; a still disc is not."""
+    from nav.walkers import WalkerTracker
+
+    def disc_points(x: float, y: float) -> np.ndarray:
+        scan = person_scan(0.0, x, y)
+        return scan.points()
+
+    tr = WalkerTracker()
+    tr.update(disc_points(1.5, 0.0), 0.0)
+    vel = tr.update(disc_points(1.4, 0.0), 0.1)
+    assert vel.shape[0] > 3 and np.allclose(vel, [-1.0, 0.0], atol=0.05)
+    assert tr.centres.shape == (1, 2) and np.allclose(tr.velocities, [[-1.0, 0.0]], atol=0.05)
+    tr = WalkerTracker()
+    tr.update(disc_points(1.5, 0.0), 0.0)
+    assert not tr.update(disc_points(1.5, 0.0), 0.1).any() and tr.centres.shape == (0, 2)
+    wall = np.column_stack((np.full(40, 1.5), np.linspace(-1.0, 1.0, 40)))
+    tr = WalkerTracker()
+    tr.update(wall, 0.0)
+    assert not tr.update(wall - [0.1, 0.0], 0.1).any()
+
+
+def points_scan(stamp: float, pts: np.ndarray, beams: int = 3600) -> LaserScan:
+    """A scan (laser at base_link) with one return at each of the (N, 2) points."""
+    r = np.full(beams, np.inf)
+    inc = 2 * math.pi / beams
+    k = np.round((np.arctan2(pts[:, 1], pts[:, 0]) + math.pi) / inc).astype(int) % beams
+    r[k] = np.hypot(pts[:, 0], pts[:, 1])
+    return LaserScan(stamp, -math.pi, inc, r, 0.15, 6.0)
+
+
+def test_a_turn_that_presses_a_touching_leg_in_is_neither_offered_nor_passed() -> None:
+    """A chair leg 2 mm inside the front edge of a 0.51 x 0.43 m base (pressed in within the
+    simulator's contact skin): turning right takes it deeper (the simulator refuses that turn),
+    turning left frees it. The dashboard's ``free`` list offers only the left turn and the filter
+    stops the right one; readings inside the footprint used to be ignored by the turn check, so
+    both turns were offered and the right one never moved the robot."""
+    leg = np.column_stack((np.full(4, 0.253), np.linspace(0.15, 0.18, 4)))
+    f = SafetyFilter(big_skid())
+    f(Twist2D(), SensorFrame(stamp=0.0, scan=points_scan(0.0, leg)))
+    free = f.free_motions(0.0)
+    assert free["turn left"] and not free["turn right"] and not free["forward"] and free["back"]
+    right, reason = f(Twist2D(0.0, 0.0, -0.8), SensorFrame(stamp=0.05))
+    assert abs(right.wz) < 0.1 and reason is not None
+    left, _ = f(Twist2D(0.0, 0.0, 0.8), SensorFrame(stamp=0.1))
+    assert left.wz > 0.7

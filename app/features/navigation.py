@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 
 from app.modes import Mode, TransitionRefused
+from nav.control.teb import TebController
 from nav.localization.divergence import DivergenceMonitor, DivergenceOptions
 from nav.navigator import TERMINAL
 from nav.planning.errors import PlannerError
@@ -45,6 +46,7 @@ from nav.types import (
     Twist2D,
     wrap_angle,
 )
+from nav.walkers import MAX_SCAN_GAP, WalkerTracker
 from nav.warmup import warm_up_navigation
 
 if TYPE_CHECKING:
@@ -312,6 +314,8 @@ class Navigation:
         self._local_cm: Costmap | None = None
         self._costmap_version = 0
         self._last_global_update = -math.inf
+        # walkers in the map frame, for a controller that predicts them (TEB's dynamic obstacles)
+        self.walkers = WalkerTracker()
         self._seen_resets = 0
         self.costmap_view: str = o.costmap_view  # "global" | "local": which one the 3D view shows
         self._active = False
@@ -593,6 +597,7 @@ class Navigation:
             self._cmd = None
             return
         self._update_costmaps(session, frame, now)
+        self._track_walkers(session, frame, now)
         mode = session.modes.mode
         if self._active and mode not in (Mode.NAVIGATING, Mode.RECOVERING):
             if self._cause is None:
@@ -681,6 +686,24 @@ class Navigation:
             outcome={"kind": "cancelled", "goals_reached": req.reached},
             cause=cause.as_dict(),
         )
+
+    def _track_walkers(self, session: Session, frame: SensorFrame, now: float) -> None:
+        """Track walkers in the lidar's returns (map frame, placed like the costmaps' marks) and
+        hand them, moved on to ``now``, to a controller that predicts them."""
+        if not self.localization.localized:
+            self.walkers.reset()
+        elif frame.scan is not None:
+            laser = session.pose.compose(self.localization.laser_pose)
+            self.walkers.update(laser.transform_points(frame.scan.points()), frame.scan.stamp)
+        teb = self.navigator.controller
+        if not isinstance(teb, TebController):
+            return
+        age = now - self.walkers.stamp
+        if 0.0 <= age <= MAX_SCAN_GAP:
+            w = self.walkers
+            teb.set_walkers(w.centres + w.velocities * age, w.velocities)
+        else:
+            teb.set_walkers(np.zeros((0, 2)), np.zeros((0, 2)))
 
     def _blame_localization(self) -> None:
         """Stuck with the footprint on a wall of the map itself: no robot can stand there, so the

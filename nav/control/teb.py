@@ -55,6 +55,7 @@ from nav.control.teb_optim import (
 from nav.control.teb_options import TebOptions
 from nav.costmap.footprint import circle_footprint
 from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, Costmap, Path, Pose2D, Twist2D, wrap_angle
+from nav.walkers import PERSON_RADIUS
 
 _FAR = 1e3  # distance reported by an obstacle-free field, m
 
@@ -264,6 +265,24 @@ class TebController:
         self._fail_cycles = 0
         self._structures: dict[tuple[int, bool], BandStructure] = {}
         self.last_debug: TebDebug | None = None
+        self._walkers = np.zeros((0, 2))  # walkers' centres now (map frame)
+        self._walker_vel = np.zeros((0, 2))  # and their velocities, m/s
+
+    def set_walkers(self, centres: np.ndarray, velocities: np.ndarray) -> None:
+        """Walkers (map frame, (W, 2) centres now and velocities) for the next ``compute`` calls:
+        constant-velocity dynamic obstacles (teb_local_planner's ``include_dynamic_obstacles``)."""
+        c = np.asarray(centres, dtype=float).reshape(-1, 2)
+        v = np.asarray(velocities, dtype=float).reshape(-1, 2)
+        if c.shape != v.shape or not (np.isfinite(c).all() and np.isfinite(v).all()):
+            raise ControllerError("walkers need finite (W, 2) centres and velocities of one shape")
+        self._walkers, self._walker_vel = c, v
+
+    def _walkers_at(self, dts: np.ndarray) -> np.ndarray:
+        """Walkers' predicted centres (n - 2, W, 2) at the band's interior poses' times."""
+        if not self.options.include_dynamic_obstacles:
+            return np.zeros((max(len(dts) - 1, 0), 0, 2))
+        t = np.cumsum(dts)[:-1]
+        return self._walkers[None] + self._walker_vel[None] * t[:, None, None]
 
     # -- path -------------------------------------------------------------------------------------
     def set_path(self, path: Path) -> None:
@@ -474,7 +493,9 @@ class TebController:
         seg_a, seg_b = ref_xy[:-1], ref_xy[1:]
         near = _nearest_segments(poses[1:-1, :2], seg_a, seg_b)
         cand = np.clip(near[:, None] + np.arange(-1, 2)[None, :], 0, len(seg_a) - 1)  # (m, 3)
-        problem = BandProblem(ends, seg_a[cand], seg_b[cand], dfield.sample, v0, goal_acc)
+        problem = BandProblem(
+            ends, seg_a[cand], seg_b[cand], dfield.sample, v0, goal_acc, self._walkers_at(dts), PERSON_RADIUS
+        )
         key = (n, goal_acc)
         if key not in self._structures:
             self._structures[key] = BandStructure(n, o, goal_acc)
@@ -560,6 +581,11 @@ class TebController:
             if hit >= 0:
                 self._band = self._dts = None  # re-seed next cycle
                 return self._fail(f"band pose {hit} collides", poses, dts, local, warm, debug)
+            meet = self._walker_conflict(poses[: k + 1], dts[:k])
+            if meet >= 0:
+                # the band would meet a walker: wait (stop this cycle; re-seeded next cycle)
+                self._band = self._dts = None
+                return self._fail(f"band pose {meet} meets a walker", poses, dts, local, warm, debug)
         self._fail_cycles = 0
         vx, vy, wz = (float(v) for v in debug.velocities[0])
         if not o.holonomic:
@@ -589,6 +615,17 @@ class TebController:
         if self._fail_cycles * self.options.control_period > self.options.failure_tolerance:
             raise PatienceExceeded(f"no feasible band for {self._fail_cycles} cycles ({why})", {"teb": 1})
         raise NoValidControl(why, {"teb": 1})
+
+    def _walker_conflict(self, poses: np.ndarray, dts: np.ndarray) -> int:
+        """Index (1-based, into ``poses``) of the first pose whose circumscribed circle takes in a
+        walker's predicted body at that pose's time, or -1."""
+        if not (self.options.include_dynamic_obstacles and len(self._walkers) and len(dts)):
+            return -1
+        t = np.cumsum(dts)
+        at = self._walkers[None] + self._walker_vel[None] * t[:, None, None]  # (k, W, 2)
+        gap = np.hypot(*(at - poses[1:, None, :2]).transpose(2, 0, 1)).min(axis=1)
+        bad = np.flatnonzero(gap < self._radius + PERSON_RADIUS)
+        return int(bad[0]) + 1 if bad.size else -1
 
     def _swept_collisions(self, costmap: Costmap, poses: np.ndarray) -> int:
         """Index (1-based, into ``poses``) of the first segment end whose swept footprint (from the

@@ -43,6 +43,10 @@ class BandProblem:
     goal_acc: bool  # decelerate to rest at the band's end
     ref_ab: tuple[np.ndarray, np.ndarray] = field(init=False)  # segments' (dx, dy), (m, C) each
     ref_inv_len2: np.ndarray = field(init=False)  # 1 / squared segment lengths, (m, C)
+    # walkers' predicted centres at each interior pose's time (m, W, 2), with the body radius they
+    # are taken to have: TEB's dynamic obstacles (EdgeDynamicObstacle, time fixed per pose)
+    walkers: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 2)))
+    walker_radius: float = 0.0
 
     def __post_init__(self) -> None:
         ab = self.ref_b - self.ref_a
@@ -215,6 +219,21 @@ def _segment_distance(pts: np.ndarray, p: BandProblem) -> tuple[np.ndarray, np.n
     return dist, np.column_stack((dx[best] * inv, dy[best] * inv))
 
 
+def _with_walkers(
+    xy: np.ndarray, d: np.ndarray, grad: np.ndarray, p: BandProblem
+) -> tuple[np.ndarray, np.ndarray]:
+    """The static field's distance and gradient per pose, replaced by the nearest walker's (its
+    predicted centre at the pose's time, less its radius) where that is nearer."""
+    off = xy[:, None, :] - p.walkers  # (m, W, 2)
+    dist = np.hypot(off[..., 0], off[..., 1])
+    w = dist.argmin(axis=1)
+    rows = np.arange(len(xy))
+    dw = dist[rows, w]
+    closer = dw - p.walker_radius < d
+    unit = off[rows, w] / np.maximum(dw, 1e-9)[:, None]
+    return np.where(closer, dw - p.walker_radius, d), np.where(closer[:, None], unit, grad)
+
+
 def evaluate(
     z: np.ndarray, p: BandProblem, o: TebOptions, st: BandStructure, radius: float
 ) -> tuple[np.ndarray, list[np.ndarray]]:
@@ -229,6 +248,8 @@ def evaluate(
     dist, grad = _segment_distance(poses[1:-1, :2], p)
     r1[:, 0], j1[:, 0] = sw * dist, sw * grad
     d, dgrad = p.sample(poses[1:-1, :2])
+    if p.walkers.shape[1]:
+        d, dgrad = _with_walkers(poses[1:-1, :2], d, dgrad, p)
     scale = max(o.min_obstacle_dist, 0.05)
     k = np.array([math.sqrt(o.weight_obstacle), math.sqrt(o.weight_inflation)]) / scale
     gap = np.array([o.min_obstacle_dist + 0.01, o.inflation_dist]) - (d - radius)[:, None]

@@ -67,6 +67,10 @@ class TebOptions:
     max_pose_separation: float = 0.1
     """Largest distance between band poses, m (navdeck: keeps a thin obstacle from slipping
     between two poses, which TEB's dt-based sizing allows for a fast robot)."""
+    include_dynamic_obstacles: bool = True
+    """Take the walkers given by ``TebController.set_walkers`` as obstacles at their predicted
+    position at each band pose's time (TEB's ``include_dynamic_obstacles``, default False there;
+    on here: issue 16, TEB must respect people's predicted motion)."""
     feasibility_check_no_poses: int = 5
     """Band poses footprint-checked against the costmap before a command is sent. TEB 5."""
     force_reinit_new_goal_dist: float = 1.0
