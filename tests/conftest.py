@@ -11,6 +11,13 @@ from app.embedded import EmbeddedServer, serve_in_thread
 
 ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"
+CHROMIUM = Path("/usr/bin/chromium")  # Debian's, installed by scripts/test.sh when root
+CHROMIUM_ARGS = [
+    "--no-sandbox",
+    "--use-angle=swiftshader",
+    "--enable-unsafe-swiftshader",
+    "--disable-background-networking",
+]
 
 
 def make_settings(tmp_path: Path, **overrides):
@@ -88,3 +95,15 @@ def db_client(tmp_path: Path, db_url: str):
     runtime = Runtime.build(make_settings(tmp_path, db_url=db_url))
     with TestClient(create_app(runtime)) as c:
         yield c
+
+
+@pytest.fixture(scope="module")
+def browser():
+    """One headless chromium (software WebGL) per browser-test module."""
+    sync_api = pytest.importorskip("playwright.sync_api")
+    with sync_api.sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        try:
+            yield b
+        finally:
+            b.close()

@@ -12,7 +12,7 @@ from collections.abc import Iterator
 
 import pytest
 from conftest import ARTIFACTS, make_settings
-from test_dashboard_browser import ARGS, CHROMIUM, LONG
+from test_dashboard_browser import CHROMIUM, LONG
 
 from app.auth import UserStore
 from app.embedded import EmbeddedServer, serve_in_thread
@@ -35,16 +35,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
         store.add_user(*VIEWER, role="viewer")
         yield s
 
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
 
 
 def new_page(browser):

@@ -8,7 +8,6 @@ share the robot. Features whose backend is not there yet skip with the reason. S
 from __future__ import annotations
 
 import json
-import pathlib
 import threading
 import time
 from collections.abc import Iterator
@@ -16,19 +15,13 @@ from collections.abc import Iterator
 import httpx
 import numpy as np
 import pytest
-from conftest import ARTIFACTS, make_settings
+from conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
 from app.viewer import palette
 from nav.types import Pose2D
 
-CHROMIUM = pathlib.Path("/usr/bin/chromium")
-ARGS = [
-    "--no-sandbox",
-    "--use-angle=swiftshader",
-    "--enable-unsafe-swiftshader",
-    "--disable-background-networking",
-]
+ARGS = CHROMIUM_ARGS
 LONG = 120_000  # ms: the main page can stall while the 3D view renders in software
 
 pytestmark = [
@@ -72,16 +65,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
     with serve_in_thread(make_settings(tmp, viewer=True)) as s:
         yield s
 
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
 
 
 @pytest.fixture(scope="module")

@@ -41,16 +41,6 @@ def patient_url(pair: EmulatorPair) -> str:
     return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0"
 
 
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=["--no-sandbox"])
-        try:
-            yield b
-        finally:
-            b.close()
-
 
 @pytest.fixture
 def page(browser):

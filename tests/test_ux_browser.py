@@ -14,7 +14,7 @@ import httpx
 import numpy as np
 import pytest
 from conftest import ARTIFACTS, make_settings
-from test_dashboard_browser import ARGS, CHROMIUM, LONG, visible_ground, wait_until
+from test_dashboard_browser import CHROMIUM, LONG, visible_ground, wait_until
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
@@ -32,16 +32,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
     with serve_in_thread(make_settings(tmp_path_factory.mktemp("ux"), viewer=True)) as s:
         yield s
 
-
-@pytest.fixture(scope="module")
-def browser():
-    sync_api = pytest.importorskip("playwright.sync_api")
-    with sync_api.sync_playwright() as pw:
-        b = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=ARGS)
-        try:
-            yield b
-        finally:
-            b.close()
 
 
 def new_page(browser, **kw):
