@@ -4,6 +4,7 @@ and the missions feature on a virtual clock (run events: why each mission ended,
 from __future__ import annotations
 
 import math
+import time
 from collections import Counter
 from collections.abc import Iterator
 from datetime import datetime
@@ -47,16 +48,22 @@ def localized(server: EmbeddedServer, api: httpx.Client) -> None:
 
 
 def wait_until(api: httpx.Client, mission: dict, pred, rounds: int = 40) -> dict:
-    """Long-poll until ``pred(mission)``. Each answer must be a change (a newer version) or the end:
-    an answer at the 30 s timeout with nothing new would fail here, so this proves the wait returns
-    on a change rather than on its timeout."""
+    """Long-poll until ``pred(mission)``. An answer with nothing new is allowed only once the 30 s wait
+    ran out (a slow drive on a loaded machine), and at least one change must come back before its wait
+    ran out: this proves the wait returns on a change rather than on its timeout."""
+    polled = woke = False
     for _ in range(rounds):
         if pred(mission):
+            assert woke or not polled, "every long-poll answer came at its timeout"
             return mission
+        start = time.monotonic()
         r = api.get(f"/api/missions/{mission['id']}", params={"wait": 30, "version": mission["version"]})
+        elapsed = time.monotonic() - start
         assert r.status_code == 200, r.text
         new = r.json()
-        assert new["version"] > mission["version"] or new["state"] in TERMINAL, (mission, new)
+        changed = new["version"] > mission["version"] or new["state"] in TERMINAL
+        assert changed or elapsed >= 29.0, (elapsed, mission, new)
+        polled, woke = True, woke or (changed and elapsed < 29.0)
         mission = new
     raise AssertionError(f"mission never got there: {mission}")
 
