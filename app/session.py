@@ -446,10 +446,11 @@ class Session:
             self.collisions += 1
             self.add_event("collision", pose=[self.pose.x, self.pose.y, self.pose.theta])
         self.link_state, self.link_reason = frame.link.state, frame.link.reason
-        # garbage before silence: withheld garbage scans also make the lidar look silent after a while
+        bad_scans = self.fault_monitor.lidar_reason()  # garbage or stuck frames
         # what is wrong with the lidar now: the driver's word, garbage or stuck frames, silence
-        self.lidar_fault = frame.lidar_fault or self.fault_monitor.lidar_reason() or self._lidar_silence(now)
-        fault = frame.fault or self.fault_monitor.lidar_reason() or self._fault_condition(now) or motion_fault
+        self.lidar_fault = frame.lidar_fault or bad_scans or self._lidar_silence(now)
+        # garbage before silence: withheld garbage scans also make the lidar look silent after a while
+        fault = frame.fault or bad_scans or self._fault_condition(now) or motion_fault
         if fault is not None and self.fault is None:
             self._enter_fault(fault)
         elif fault is not None and fault != self.fault and self.modes.mode == Mode.FAULT:

@@ -127,12 +127,10 @@ class Missions:
             m = self.get(mission_id)
             if m.state in TERMINAL:
                 raise MissionEnded(f"mission {mission_id} already ended: {m.state.value}")
-            if m.state != MissionState.CANCELING:
-                current = self.nav.pending_request() or self.nav.request_id
-                if current == m.request_id:
-                    self.nav.cancel(actor=actor, reason=StopReason.OPERATOR_CANCEL)
-                    m.state = MissionState.CANCELING
-                    self._changed(m)
+            if m.state != MissionState.CANCELING and self.nav.current_request == m.request_id:
+                self.nav.cancel(actor=actor, reason=StopReason.OPERATOR_CANCEL)
+                m.state = MissionState.CANCELING
+                self._changed(m)
             return m
 
     def get(self, mission_id: str) -> Mission:

@@ -544,6 +544,11 @@ class Navigation:
         req = self._request
         return req.id if req is not None and self._active else None
 
+    @property
+    def current_request(self) -> int | None:
+        """The request a cancel now would stop: one accepted but not picked up yet, else the running one."""
+        return self.pending_request() or self.request_id
+
     def _guard(self) -> str | None:
         if not self.localization.localized:
             return "not localized: set the initial pose or run global localization"

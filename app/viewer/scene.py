@@ -418,8 +418,7 @@ class Viewer:
     def _on_layer_check(self, token: str, node: str, event: Any) -> None:
         if event.client_id is None:
             return
-        label = next(k for k, v in LAYERS.items() if v == node)
-        self.set_layer_enabled(label, bool(event.target.value), token)
+        self._set_node_enabled(node, bool(event.target.value), token)
 
     def _refresh_client(self, view: ClientView, node: str) -> None:
         """Show a layer to one client iff its tab has the checkbox on and the latest snapshot had data."""
@@ -447,7 +446,9 @@ class Viewer:
 
     def set_layer_enabled(self, label: str, enabled: bool, tab: str = DEFAULT_TAB) -> None:
         """Tick or untick a layer checkbox of one tab (same effect as its user doing it)."""
-        node = LAYERS[label]
+        self._set_node_enabled(LAYERS[label], enabled, tab)
+
+    def _set_node_enabled(self, node: str, enabled: bool, tab: str) -> None:
         with self.tabs.lock:
             self.tabs.tab(tab).layers[node] = bool(enabled)
             views = self.tabs.clients_of(tab)

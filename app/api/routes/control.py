@@ -15,7 +15,7 @@ from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel
 from app.security import LEASE_RULES, principal_of
-from app.viewer.scene import Viewer
+from app.viewer.scene import KIND_LABELS, Viewer
 
 router = APIRouter(tags=["control"])
 
@@ -89,9 +89,6 @@ class ClickModeRequest(StrictModel):
     )
 
 
-CLICK_KINDS = ("goal", "initial_pose")
-
-
 def get_viewer(runtime: RuntimeDep) -> Viewer | None:
     """The running 3D view, or None (``--no-viewer``)."""
     viewer = runtime.viewer
@@ -119,8 +116,8 @@ def get_click_mode(viewer: ViewerDep, tab: str = Query("", max_length=64, patter
     responses={422: {"description": "unknown kind or tab"}, 503: {"description": "no 3D view"}},
 )
 def set_click_mode(body: ClickModeRequest, viewer: ViewerDep):
-    if body.kind not in CLICK_KINDS:
-        return JSONResponse({"detail": f"kind must be one of: {', '.join(CLICK_KINDS)}"}, status_code=422)
+    if body.kind not in KIND_LABELS:  # the view's own pose kinds ("goal", "initial_pose")
+        return JSONResponse({"detail": f"kind must be one of: {', '.join(KIND_LABELS)}"}, status_code=422)
     if viewer is None:
         return JSONResponse({"detail": "the 3D view is not running"}, status_code=503)
     viewer.set_click_kind(body.tab, body.kind)

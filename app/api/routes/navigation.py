@@ -100,13 +100,15 @@ def cancel(rt: RuntimeDep, actor: ActorDep):
     if err:
         return err
     missions = get_missions(rt)
-    m = missions.for_request(nav.pending_request() or nav.request_id)
-    try:
-        was_running = m is not None and missions.cancel(m.id, actor) is not None
-    except MissionEnded:  # it ended between the look-up and the cancel
-        was_running = False
+    m = missions.for_request(nav.current_request)
     if m is None:
         was_running = nav.cancel(actor=actor)
+    else:
+        try:
+            missions.cancel(m.id, actor)
+            was_running = True
+        except MissionEnded:  # it ended between the look-up and the cancel
+            was_running = False
     return {**navigation_state(nav), "cancelled": was_running, "mission_id": None if m is None else m.id}
 
 
