@@ -207,10 +207,9 @@ class LogOddsGrid:
         """Drop the samples of return-less rays from their first occupied cell on (occupied in the
         grid or hit by this scan, ``mark == 2``). Samples come ray by ray in order along each ray.
         Returns the kept flat indices and, per miss ray, the fraction of it kept."""
-        n_rays = miss.size
-        counts = np.bincount(ray, minlength=n_rays)
         if not miss.any():
             return free_idx, np.ones(0)
+        counts = np.bincount(ray, minlength=miss.size)
         k = np.arange(ray.size) - np.repeat(np.cumsum(counts) - counts, counts)
         blocked = miss[ray] & ((mark[free_idx] == 2) | (flat[free_idx] > 0.0))
         first = counts.copy()

@@ -168,6 +168,13 @@ def _boundary_distance(points: np.ndarray, a: np.ndarray, e: np.ndarray, inv: np
     return np.sqrt(dist2[rows, k]), closest[rows, k]
 
 
+def _into_frames(th: np.ndarray, dx: np.ndarray, dy: np.ndarray) -> np.ndarray:
+    """(K, N, 2): the (K, N) offsets ``dx``, ``dy`` from K poses rotated into those poses' frames
+    (headings ``th``, (K,))."""
+    c, s = np.cos(th)[:, None], np.sin(th)[:, None]
+    return np.stack((c * dx + s * dy, -s * dx + c * dy), axis=-1)
+
+
 class SafetyFilter:
     """``filter(cmd, frame) -> (cmd', reason | None)``: the session's ``safety`` hook."""
 
@@ -317,18 +324,7 @@ class SafetyFilter:
         if cmd.is_zero() or pts.shape[0] == 0:
             self.status = SafetyStatus(None, None, math.inf, None)
             return cmd, None
-        if self._circle is not None:
-            rad = np.hypot(pts[:, 0], pts[:, 1])
-            inside = rad <= self._circle
-            dist = np.maximum(rad - self._circle, 0.0)
-            normal = pts / np.maximum(rad, 1e-9)[:, None]
-        else:
-            inside = _inside(pts, self._a, self._e)
-            dist, closest = _boundary_distance(pts, self._a, self._e, self._inv)
-            dist = np.where(inside, 0.0, dist)
-            # outward direction from the footprint to each reading (from base_link when inside)
-            normal = np.where(inside[:, None], pts, pts - closest)
-            normal /= np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-9)[:, None]
+        inside, dist, normal = self._placement(pts)
         i_near = int(dist.argmin())
         nearest, near_src = float(dist[i_near]), self._name(int(src[i_near]))
         v = np.array([cmd.vx, cmd.vy])
@@ -384,10 +380,8 @@ class SafetyFilter:
         pts, _, _, _ = self._readings(now)
         if pts.shape[0] == 0:
             return math.inf
-        if self._circle is not None:
-            return float(max(np.hypot(pts[:, 0], pts[:, 1]).min() - self._circle, 0.0))
-        dist, _ = _boundary_distance(pts, self._a, self._e, self._inv)
-        return float(np.where(_inside(pts, self._a, self._e), 0.0, dist).min())
+        _, dist, _ = self._placement(pts)
+        return float(dist.min())
 
     def free_motions(self, now: float, distance: float = 0.05) -> dict[str, bool]:
         """Per elementary motion (forward, back, turn left, turn right): whether the latest readings
@@ -395,13 +389,10 @@ class SafetyFilter:
         travel (a turn: the same arc length at the footprint's farthest point). What the dashboard
         tells an operator whose robot is in contact."""
         pts, w, _, vel = self._readings(now)
-        out = {}
         if pts.shape[0] == 0:
             return {name: True for name, _, _ in self.FREE_PROBES}
-        if self._circle is not None:
-            inside = np.hypot(pts[:, 0], pts[:, 1]) <= self._circle
-        else:
-            inside = _inside(pts, self._a, self._e)
+        out = {}
+        inside, _, _ = self._placement(pts)
         horizon = self.options.time_before_collision
         for name, sv, sw in self.FREE_PROBES:
             v = distance / horizon
@@ -409,6 +400,20 @@ class SafetyFilter:
             t_c, _ = self._time_to_collision(twist, pts, w, inside, vel)
             out[name] = t_c is None
         return out
+
+    def _placement(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per reading (N, 2, base frame): whether it is inside the footprint, its distance (m) from
+        the outline (0 inside) and the unit outward direction from the footprint to it (from
+        base_link when inside)."""
+        if self._circle is not None:
+            rad = np.hypot(pts[:, 0], pts[:, 1])
+            normal = pts / np.maximum(rad, 1e-9)[:, None]
+            return rad <= self._circle, np.maximum(rad - self._circle, 0.0), normal
+        inside = _inside(pts, self._a, self._e)
+        dist, closest = _boundary_distance(pts, self._a, self._e, self._inv)
+        normal = np.where(inside[:, None], pts, pts - closest)
+        normal /= np.maximum(np.hypot(normal[:, 0], normal[:, 1]), 1e-9)[:, None]
+        return inside, np.where(inside, 0.0, dist), normal
 
     def _in_path(self, v: np.ndarray, pts: np.ndarray) -> np.ndarray:
         """Per reading: whether a straight translation along ``v`` sweeps the footprint into it (it
@@ -449,7 +454,7 @@ class SafetyFilter:
         pts: np.ndarray,
         w: np.ndarray,
         inside_now: np.ndarray,
-        vel: np.ndarray | None = None,
+        vel: np.ndarray,
     ) -> tuple[float | None, int]:
         """First simulated time at which >= min_points readings fall inside the moved footprint
         (walkers' readings move on at their predicted velocity ``vel``), and the index of one of
@@ -457,17 +462,13 @@ class SafetyFilter:
         more than ``DEEPEN_TOL``, the simulator's rule for a body in contact: a turn or a backing
         away that frees the footprint passes, one that presses a touching leg in does not."""
         o = self.options
-        cand = np.ones(pts.shape[0], dtype=bool)
         speed = math.hypot(twist.vx, twist.vy)
         reach = self._reach_fp + speed * o.time_before_collision + 1e-6
-        r = np.hypot(pts[:, 0], pts[:, 1])
-        if vel is not None:
-            r = r - np.hypot(vel[:, 0], vel[:, 1]) * o.time_before_collision
-        cand &= r <= (reach if speed > 0 else self._turn_reach)
+        r = np.hypot(pts[:, 0], pts[:, 1]) - np.hypot(vel[:, 0], vel[:, 1]) * o.time_before_collision
+        cand = r <= (reach if speed > 0 else self._turn_reach)
         if w[cand].sum() < o.min_points:
             return None, -1
-        p, wc = pts[cand], w[cand]
-        pv = vel[cand] if vel is not None else np.zeros_like(p)
+        p, wc, pv = pts[cand], w[cand], vel[cand]
         # the turn moves the footprint's corners (a circle does not change by turning)
         sweep = abs(twist.wz) * (0.0 if self._circle is not None else self._reach_fp)
         dt = o.simulation_time_step
@@ -481,9 +482,7 @@ class SafetyFilter:
         if self._circle is not None:  # rotation does not move a circle
             hit = dx * dx + dy * dy <= self._circle**2  # (K, N)
         else:
-            c, s = np.cos(th), np.sin(th)
-            local = np.stack((c[:, None] * dx + s[:, None] * dy, -s[:, None] * dx + c[:, None] * dy), axis=-1)
-            hit = _inside(local, self._a, self._e)  # (K, N)
+            hit = _inside(_into_frames(th, dx, dy), self._a, self._e)  # (K, N)
         was_in = inside_now[cand]
         if was_in.any():
             # depth of the readings inside now, at rest and along the robot's motion (their own
@@ -495,10 +494,7 @@ class SafetyFilter:
                     self._circle - np.hypot(qx, qy) > self._circle - np.hypot(q[:, 0], q[:, 1]) + DEEPEN_TOL
                 )
             else:
-                c, s = np.cos(th), np.sin(th)
-                moved = np.stack(
-                    (c[:, None] * qx + s[:, None] * qy, -s[:, None] * qx + c[:, None] * qy), axis=-1
-                )
+                moved = _into_frames(th, qx, qy)
                 depth0, _ = _boundary_distance(q, self._a, self._e, self._inv)
                 depth, _ = _boundary_distance(moved.reshape(-1, 2), self._a, self._e, self._inv)
                 inside = _inside(moved, self._a, self._e)

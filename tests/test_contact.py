@@ -14,6 +14,9 @@ import pytest
 from conftest import make_settings
 
 from app.commands.sim_nav import build_sim_stack
+from app.features import safety as safety_feature
+from app.runtime import Runtime
+from app.telemetry import snapshot_dict
 from nav.behaviors.base import BehaviorContext, Status
 from nav.behaviors.spin import Spin, SpinOptions
 from nav.control.errors import ControllerError, NoValidControl
@@ -21,6 +24,7 @@ from nav.control.footprint import swept_poses, swept_turn
 from nav.control.teb import TebController, centre_collisions
 from nav.control.teb_options import TebOptions
 from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, LaserScan, Path, Pose2D, Twist2D
+from nav.walkers import PERSON_RADIUS, WalkerTracker
 from robot.base import SensorFrame
 from robot.clock import VirtualClock
 from robot.profiles import load_profile
@@ -204,13 +208,9 @@ def press_into(session, world_name: str) -> Pose2D:
 def test_teleop_gets_out_of_the_tightest_spot_following_the_dashboard(tmp_path, world_name: str) -> None:
     """Pressed into the spot, the dashboard says "in contact" and which way is free; an operator who
     holds the first free motion for half a second at a time, safety layer on, gets the robot out."""
-    from app.features import safety
-    from app.runtime import Runtime
-    from app.telemetry import snapshot_dict
-
     rt = Runtime.build(make_settings(tmp_path, world=world_name), clock=VirtualClock())
     try:
-        feature = safety.setup(rt)
+        feature = safety_feature.setup(rt)
         s = rt.session
         s.request_mode("teleop")
         stuck = press_into(s, world_name)
@@ -368,8 +368,6 @@ def test_teb_band_keeps_clear_of_a_walkers_predicted_positions() -> None:
     would be ~1 s later: the optimized band keeps the footprint's circle off the walker's body at
     every pose's own time (TEB's EdgeDynamicObstacle), where without the walker it runs straight
     through that place and time."""
-    from nav.walkers import PERSON_RADIUS
-
     pose, v = Pose2D(0.5, 1.5, 0.0), Twist2D(0.3, 0.0, 0.0)
     start, vel = np.array([[1.1, 0.3]]), np.array([[0.0, 1.0]])
 
@@ -402,7 +400,6 @@ def test_teb_rejects_bad_walkers() -> None:
 def test_walker_tracker_follows_a_person_sized_cluster() -> None:
     """A 0.3 m disc moving 0.1 m between scans 0.1 s apart is a walker at 1 m/s; a wall-sized
     cluster moving the same is not; a still disc is not."""
-    from nav.walkers import WalkerTracker
 
     def disc_points(x: float, y: float) -> np.ndarray:
         scan = person_scan(0.0, x, y)

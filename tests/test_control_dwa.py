@@ -27,13 +27,14 @@ from nav.control import (
     NoValidControl,
     PatienceExceeded,
 )
-from nav.control.critics import Oscillation
+from nav.control.critics import Oscillation, PreferForward
 from nav.control.footprint import CostWindow, FootprintModel
 from nav.control.footprint import _inside_polygon as inside_polygon
 from nav.control.geometry import polyline_distance, project_onto_polyline, project_poses
 from nav.control.trajectory import sample_twists, simulate_arcs, time_steps, window_1d
 from nav.costmap.footprint import circle_footprint
 from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
+from robot.profiles import load_profile
 
 SKID = DwaOptions(footprint=SKID_FOOTPRINT, min_vel_x=-0.15)
 OMNI = DwaOptions(
@@ -582,8 +583,6 @@ def test_footprint_already_touching_a_chair_leg_may_back_or_turn_out_but_not_dee
 
 
 def test_prefer_forward_scores_like_dwb() -> None:
-    from nav.control.critics import PreferForward
-
     opts = replace(SKID, critics=(*SKID.critics, "PreferForward"), prefer_forward_penalty=7.0)
     ctl = DwaController(opts)
     ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
@@ -619,8 +618,6 @@ def test_prefer_forward_scores_like_dwb() -> None:
 
 
 def test_prefer_forward_is_on_for_reversing_skid_bases_only() -> None:
-    from robot.profiles import load_profile
-
     skid, omni = load_profile("skid4"), load_profile("omni4")
     assert skid.limits.min_vel_x < 0  # the stock skid base can reverse
     assert "PreferForward" in DwaOptions.for_robot(skid).critics
@@ -637,8 +634,6 @@ def _reversing_time(opts: DwaOptions, occ: np.ndarray, start: Pose2D, path: Path
 
 
 def test_skid_base_turns_round_for_a_goal_behind_instead_of_reversing() -> None:
-    from robot.profiles import load_profile
-
     opts = DwaOptions.for_robot(load_profile("skid4"))
     path = straight(4.5, 3.0, 1.0, 3.0)  # 3.5 m behind the robot, which faces +x
     back_s, reached = _reversing_time(opts, room(), Pose2D(4.5, 3.0, 0.0), path, 40.0)
@@ -650,8 +645,6 @@ def test_skid_base_turns_round_for_a_goal_behind_instead_of_reversing() -> None:
 
 
 def test_skid_base_still_backs_out_of_a_dead_end() -> None:
-    from robot.profiles import load_profile
-
     opts = DwaOptions.for_robot(load_profile("skid4"))
     # a 0.30 m wide dead end (the 0.20 x 0.24 m robot needs 0.31 m to turn round), its nose 8 cm
     # from the end: backing out is the only way

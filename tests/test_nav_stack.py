@@ -3,15 +3,19 @@
 from __future__ import annotations
 
 import math
+import threading
 
 import numpy as np
 import pytest
 
+import app.features.navigation as navigation_feature
 from app.commands.sim_nav import SimStack, build_sim_stack
 from app.features.localization import LocalizationRequestError
 from app.features.navigation import GoalRejected, NavigationRefused
 from app.modes import Mode
 from maps.stock import stock_world_path
+from nav.control.dwa import _prune
+from nav.planning.grid_search import _run
 from nav.types import Pose2D
 from robot.sim import World
 
@@ -353,24 +357,20 @@ def test_warm_up_runs_the_navigation_kernels_on_a_worker_before_any_goal(
     compiled the A* kernels, and the first DWA cycle then compiled its kernels on the loop thread.
     With ``warm_up`` (on by default with a real clock) the feature does that on a worker at
     start-up, with its own planner and controllers."""
-    import threading
-
-    import app.features.navigation as feature
-    from nav.control.dwa import _prune
-    from nav.planning.grid_search import _run
-
     threads: list[str] = []
-    real = feature.warm_up_navigation
+    real = navigation_feature.warm_up_navigation
 
     def spy(*args, **kwargs):
         threads.append(threading.current_thread().name)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(feature, "warm_up_navigation", spy)
+    monkeypatch.setattr(navigation_feature, "warm_up_navigation", spy)
     st = apartment(localization="truth")
     try:
         assert st.navigation.warmed_up is None  # a simulated run on a virtual clock: not unless asked
-        navigation = feature.Navigation(st.session, st.localization, feature.NavigationOptions(warm_up=True))
+        navigation = navigation_feature.Navigation(
+            st.session, st.localization, navigation_feature.NavigationOptions(warm_up=True)
+        )
         assert navigation.warmed_up is not None
         timings = navigation.warmed_up.result(timeout=600)
     finally:

@@ -6,6 +6,7 @@ building and is the building's size."""
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -71,16 +72,12 @@ def test_new_submap_does_not_clear_past_walls_the_older_one_holds() -> None:
     opts = SlamOptions(submap_num_range_data=3, minimum_travel_distance=0.0, minimum_time_interval=0.0)
     slam = GraphSlam(opts)
     for k in range(7):  # submaps 0, 1 (from node 3) and 2 (from node 6)
-        slam.add_scan(replace_stamp(ring_scan(2.0, []), k), Pose2D(0.0, 0.0, 0.01 * k))
-    slam.add_scan(replace_stamp(ring_scan(2.0, list(range(80, 100))), 8), Pose2D(0.0, 0.0, 0.08))
+        slam.add_scan(replace(ring_scan(2.0, []), stamp=k), Pose2D(0.0, 0.0, 0.01 * k))
+    slam.add_scan(replace(ring_scan(2.0, list(range(80, 100))), stamp=8), Pose2D(0.0, 0.0, 0.08))
     grid = slam.map()
     rows, cols = np.nonzero(grid.data >= 0)
     centres = grid.geometry.cell_to_world(rows, cols)
     assert np.hypot(centres[:, 0], centres[:, 1]).max() < 2.0 + 2 * grid.geometry.resolution
-
-
-def replace_stamp(scan: LaserScan, stamp: float) -> LaserScan:
-    return LaserScan(stamp, scan.angle_min, scan.angle_increment, scan.ranges, scan.range_min, scan.range_max)
 
 
 @pytest.mark.parametrize("rotated", [False, True])

@@ -52,22 +52,18 @@ def _corridor(period: float, length: float = 30.0, res: float = 0.05) -> np.ndar
     return occ
 
 
-def _submap_of(occ: np.ndarray, poses: list[Pose2D], res: float = 0.05) -> Submap:
-    sm = Submap(0, poses[0], LogOddsOptions(resolution=res, grow_margin=2.0), 0.05)
-    for k, p in enumerate(poses):
-        scan = cast_scan(occ, res, p, 181, math.pi, 8.0)
-        ok = np.isfinite(scan.ranges)
-        a = scan.angles
-        pts = np.column_stack((scan.ranges[ok] * np.cos(a[ok]), scan.ranges[ok] * np.sin(a[ok])))
-        sm.insert(k, p, Pose2D(), pts, np.zeros((0, 2)))
-    return sm
-
-
-def _scan_points(occ: np.ndarray, pose: Pose2D) -> np.ndarray:
-    scan = cast_scan(occ, 0.05, pose, 181, math.pi, 8.0)
+def _scan_points(occ: np.ndarray, pose: Pose2D, res: float = 0.05) -> np.ndarray:
+    scan = cast_scan(occ, res, pose, 181, math.pi, 8.0)
     ok = np.isfinite(scan.ranges)
     a = scan.angles[ok]
     return np.column_stack((scan.ranges[ok] * np.cos(a), scan.ranges[ok] * np.sin(a)))
+
+
+def _submap_of(occ: np.ndarray, poses: list[Pose2D], res: float = 0.05) -> Submap:
+    sm = Submap(0, poses[0], LogOddsOptions(resolution=res, grow_margin=2.0), 0.05)
+    for k, p in enumerate(poses):
+        sm.insert(k, p, Pose2D(), _scan_points(occ, p, res), np.zeros((0, 2)))
+    return sm
 
 
 def _search(occ: np.ndarray, path: list[Pose2D], at: Pose2D, believed: Pose2D) -> tuple:

@@ -13,8 +13,9 @@ from bench.teb import corridor, omni_options, skid_options, straight_path
 from nav.control import ControllerError, InvalidPath, NoValidControl
 from nav.control.errors import PatienceExceeded
 from nav.control.teb import DistanceField, TebController, TebDebug, band_fold
-from nav.control.teb_options import TebConfigError, TebOptions
+from nav.control.teb_options import FORWARD_DRIVE_WEIGHT, TebConfigError, TebOptions
 from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
+from robot.profiles import load_profile
 
 SKID_INSCRIBED = 0.10
 DIFF = skid_options()
@@ -294,8 +295,6 @@ def test_bad_options_name_the_field(kw: dict, field: str) -> None:
 
 
 def test_options_for_robot_profiles() -> None:
-    from robot.profiles import load_profile
-
     skid = TebOptions.for_robot(load_profile("skid4"))
     assert not skid.holonomic and skid.max_vel_x == 0.26 and skid.max_vel_x_backwards == 0.15
     assert skid.circumscribed_radius == pytest.approx(math.hypot(0.12, 0.10))
@@ -338,9 +337,6 @@ def test_feasibility_treats_lethal_cells_as_points_at_their_centres() -> None:
 
 
 def test_reversing_skid_base_gets_teb_forward_drive_weight_omni_does_not() -> None:
-    from nav.control.teb_options import FORWARD_DRIVE_WEIGHT, TebOptions
-    from robot.profiles import load_profile
-
     assert TebOptions.for_robot(load_profile("skid4")).weight_kinematics_forward_drive == FORWARD_DRIVE_WEIGHT
     assert TebOptions.for_robot(load_profile("omni4")).weight_kinematics_forward_drive == 1.0
     # an explicit override still wins

@@ -33,7 +33,7 @@ from nav.control.footprint_kernels import (
     _near_lethal,
     _xy_bounds,
 )
-from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, Pose2D
+from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, Pose2D, wrap_angle
 
 
 def _inside_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
@@ -293,7 +293,7 @@ def swept_poses(poses: np.ndarray, reach: float, step: float) -> np.ndarray:
     if len(p) < 2:
         return p.copy()
     d = np.diff(p, axis=0)
-    d[:, 2] = (d[:, 2] + math.pi) % (2.0 * math.pi) - math.pi
+    d[:, 2] = wrap_angle(d[:, 2])
     travel = np.hypot(d[:, 0], d[:, 1]) + np.abs(d[:, 2]) * reach
     n = np.maximum(np.ceil(travel / step).astype(np.int64), 1)
     seg = np.repeat(np.arange(len(d)), n)

@@ -281,7 +281,10 @@ class TebController:
         """Walkers' predicted centres (n - 2, W, 2) at the band's interior poses' times."""
         if not self.options.include_dynamic_obstacles:
             return np.zeros((max(len(dts) - 1, 0), 0, 2))
-        t = np.cumsum(dts)[:-1]
+        return self._predict_walkers(np.cumsum(dts)[:-1])
+
+    def _predict_walkers(self, t: np.ndarray) -> np.ndarray:
+        """Walkers' centres (len(t), W, 2) at the times ``t`` (s from now), at constant velocity."""
         return self._walkers[None] + self._walker_vel[None] * t[:, None, None]
 
     # -- path -------------------------------------------------------------------------------------
@@ -621,8 +624,7 @@ class TebController:
         walker's predicted body at that pose's time, or -1."""
         if not (self.options.include_dynamic_obstacles and len(self._walkers) and len(dts)):
             return -1
-        t = np.cumsum(dts)
-        at = self._walkers[None] + self._walker_vel[None] * t[:, None, None]  # (k, W, 2)
+        at = self._predict_walkers(np.cumsum(dts))  # (k, W, 2)
         gap = np.hypot(*(at - poses[1:, None, :2]).transpose(2, 0, 1)).min(axis=1)
         bad = np.flatnonzero(gap < self._radius + PERSON_RADIUS)
         return int(bad[0]) + 1 if bad.size else -1
@@ -630,14 +632,26 @@ class TebController:
     def _swept_collisions(self, costmap: Costmap, poses: np.ndarray) -> int:
         """Index (1-based, into ``poses``) of the first segment end whose swept footprint (from the
         previous pose) hits a lethal cell centre, or -1 when the whole sweep is free."""
+        step = self._sweep_step(costmap)
+        sweeps = [swept_poses(poses[i - 1 : i + 1], self._radius, step)[1:] for i in range(1, len(poses))]
+        if not sweeps:
+            return -1
+        hit = np.flatnonzero(self._collisions(costmap, np.vstack(sweeps)))
+        if hit.size == 0:
+            return -1
+        # the segment holding the first colliding sample (one check for all of them)
+        return int(np.searchsorted(np.cumsum([len(sw) for sw in sweeps]), hit[0], side="right")) + 1
+
+    @staticmethod
+    def _sweep_step(costmap: Costmap) -> float:
+        """Largest motion (m) of a footprint point between two checked poses of a sweep."""
+        return 0.5 * costmap.geometry.resolution
+
+    def _collisions(self, costmap: Costmap, poses: np.ndarray) -> np.ndarray:
+        """:func:`centre_collisions` of ``poses`` with this controller's footprint."""
         o = self.options
-        step = 0.5 * costmap.geometry.resolution
         round_radius = None if o.footprint else o.robot_radius
-        for i in range(1, len(poses)):
-            sweep = swept_poses(poses[i - 1 : i + 1], self._radius, step)[1:]
-            if centre_collisions(costmap, sweep, self._polygon, round_radius, o.unknown_is_lethal).any():
-                return i
-        return -1
+        return centre_collisions(costmap, poses, self._polygon, round_radius, o.unknown_is_lethal)
 
     def _rotate_to_goal(self, pose: Pose2D, goal: np.ndarray, costmap: Costmap) -> tuple[Twist2D, TebDebug]:
         """Inside ``xy_goal_tolerance``: stop translating and turn to the goal's heading, the short
@@ -648,13 +662,9 @@ class TebController:
         wz = 0.0
         if abs(err) > o.yaw_goal_tolerance:
             start = pose.as_array()
-            step = 0.5 * costmap.geometry.resolution
-            round_radius = None if o.footprint else o.robot_radius
+            step = self._sweep_step(costmap)
             for turn in (err, err - math.copysign(2.0 * math.pi, err)):
-                sweep = swept_turn(start, turn, self._radius, step)[1:]
-                if not centre_collisions(
-                    costmap, sweep, self._polygon, round_radius, o.unknown_is_lethal
-                ).any():
+                if not self._collisions(costmap, swept_turn(start, turn, self._radius, step)[1:]).any():
                     wz = float(np.clip(1.5 * turn, -o.max_vel_theta, o.max_vel_theta))
                     break
             else:

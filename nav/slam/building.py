@@ -23,7 +23,7 @@ from scipy.spatial import cKDTree
 
 from nav.raycast import RayCaster
 from nav.slam.metric import relative_poses
-from nav.types import GridGeometry, LaserScan
+from nav.types import GridGeometry, LaserScan, wrap_angle
 
 
 @dataclass(frozen=True)
@@ -195,7 +195,7 @@ def _sample_drive(waypoints: np.ndarray, speed: float, turn_rate: float, period:
             continue
         heading = math.atan2(d[1], d[0])
         prev = keys_p[-1]
-        turn = (heading - prev[2] + math.pi) % (2 * math.pi) - math.pi
+        turn = wrap_angle(heading - prev[2])
         if abs(turn) > 1e-9:
             keys_t.append(keys_t[-1] + abs(turn) / turn_rate)
             keys_p.append(np.array([prev[0], prev[1], prev[2] + turn]))
@@ -204,7 +204,7 @@ def _sample_drive(waypoints: np.ndarray, speed: float, turn_rate: float, period:
     kt, kp = np.array(keys_t), np.array(keys_p)
     t = np.arange(0.0, kt[-1], period)
     poses = np.column_stack([np.interp(t, kt, kp[:, i]) for i in range(3)])
-    poses[:, 2] = (poses[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    poses[:, 2] = wrap_angle(poses[:, 2])
     return poses
 
 
@@ -215,7 +215,7 @@ def drift_odometry(truth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     c, s = np.cos(truth[:-1, 2]), np.sin(truth[:-1, 2])
     dx, dy = np.diff(truth[:, 0]), np.diff(truth[:, 1])
     fwd, side = c * dx + s * dy, -s * dx + c * dy
-    dth = (np.diff(truth[:, 2]) + math.pi) % (2 * math.pi) - math.pi
+    dth = wrap_angle(np.diff(truth[:, 2]))
     dist = np.hypot(fwd, side)
     scale, turn_scale = 1 + rng.uniform(-0.02, 0.02), 1 + rng.uniform(-0.02, 0.02)
     bias = rng.uniform(-0.01, 0.01)
@@ -227,7 +227,7 @@ def drift_odometry(truth: np.ndarray, rng: np.random.Generator) -> np.ndarray:
     c, s = np.cos(th[:-1]), np.sin(th[:-1])
     x = truth[0, 0] + np.concatenate(([0.0], np.cumsum(c * fwd - s * side)))
     y = truth[0, 1] + np.concatenate(([0.0], np.cumsum(s * fwd + c * side)))
-    return np.column_stack((x, y, (th + math.pi) % (2 * math.pi) - math.pi))
+    return np.column_stack((x, y, wrap_angle(th)))
 
 
 def long_drive(

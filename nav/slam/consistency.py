@@ -12,6 +12,7 @@ checking"), reduced to one number: the fraction of beams contradicted.
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -36,18 +37,15 @@ def see_through_rate(
     caster = RayCaster(grid.occupied_mask(), grid.geometry)
     picked = range(0, len(scans), max(every, 1))
     contradicted = total = 0
-    # cast in chunks of scans of the same beam count (one compiled walk per chunk)
-    chunk: list[int] = []
-    for k in [*picked, -1]:
-        if k >= 0 and (not chunk or len(scans[k].ranges) == len(scans[chunk[0]].ranges)) and len(chunk) < 500:
-            chunk.append(k)
-            continue
-        if chunk:
+    # cast in chunks of up to 500 consecutive scans of the same beam count (one compiled walk each)
+    for _, group in itertools.groupby(picked, key=lambda q: len(scans[q].ranges)):
+        run = list(group)
+        for start in range(0, len(run), 500):
+            chunk = run[start : start + 500]
             ranges = np.array([scans[q].ranges for q in chunk])
             angles = np.array([scans[q].angles for q in chunk]) + poses[chunk, 2:3]
             valid = np.isfinite(ranges) & (ranges > 0.1) & (ranges <= max_range)
             expected = caster.cast(poses[chunk, :2], angles, max_range + margin)
             contradicted += int(np.count_nonzero(valid & (ranges > expected + margin)))
             total += int(np.count_nonzero(valid))
-        chunk = [k] if k >= 0 else []
     return contradicted / total if total else math.nan

@@ -520,13 +520,15 @@ class GraphSlam:
             return [], [], n
         fin = np.array(finished)
         centres = np.array([glob[sm_nodes[j]][:, :2].mean(axis=0) for j in finished])
-        local_xy = np.array([nd.local.as_array()[:2] for nd in nodes])
-        path = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(local_xy, axis=0).T))))
+        path = np.zeros(0)  # distance driven up to each node: only the global search needs it
+        if o.global_search_drift > 0:
+            local_xy = np.array([nd.local.as_array()[:2] for nd in nodes])
+            path = np.concatenate(([0.0], np.cumsum(np.hypot(*np.diff(local_xy, axis=0).T))))
         found: list[LoopCandidate] = []
         agreed: list[LoopCandidate] = []
         for i in range(start, n):
             local_due = i % o.loop_search_every_n_nodes == 0
-            global_due = i % o.global_search_every_n_nodes == 0
+            global_due = o.global_search_drift > 0 and i % o.global_search_every_n_nodes == 0
             if not (local_due or global_due):
                 continue
             d = np.hypot(*(centres - glob[i, :2]).T)
@@ -568,7 +570,7 @@ class GraphSlam:
                         found.append(cand)
                         self._seen_at[j] = i
                     self._keep_field(submaps, j)
-            if global_due and o.global_search_drift > 0:
+            if global_due:
                 agreed.extend(
                     self._search_global(
                         i, nodes, glob, submaps, fin, sm_nodes, sm_glob, d, eligible, uncertainty

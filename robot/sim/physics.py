@@ -288,22 +288,20 @@ class SimBody:
         candidate = integrate_twist(self.pose, body, dt)
         contact = self.collides(world, candidate)
         if contact:
-            hit = self.last_hit
             taken = self._contact_motion(world, body, dt)
-            self.last_hit = hit
             if taken is None:
                 self.velocity = Twist2D()
                 self.last_accel = (-v.vx / dt, -v.vy / dt)
                 self.true_yaw_rate = 0.0
                 self._rest = None
                 return True
-            candidate, part = taken
+            candidate, body = taken
             # the motors keep turning only for the part of the motion the contact lets through
-            scale_v = 0.0 if part.vx == 0.0 and part.vy == 0.0 else 1.0
-            scale_w = 0.0 if part.wz == 0.0 else 1.0
-            motor = Twist2D(vx * scale_v, vy * scale_v, wz * scale_w)
-            body = part
-            vx, vy, wz = motor.vx, motor.vy, motor.wz
+            if body.vx == 0.0 and body.vy == 0.0:
+                vx = vy = 0.0
+            if body.wz == 0.0:
+                wz = 0.0
+            motor = Twist2D(vx, vy, wz)
         # plain floats: four numpy ops per substep cost more than the arithmetic (same IEEE results)
         k = dt / self.profile.wheel_radius
         self._wheel = [a + v * k for a, v in zip(self._wheel, self._rim_speeds(motor), strict=True)]
