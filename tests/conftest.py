@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -26,6 +28,23 @@ def make_settings(tmp_path: Path, **overrides):
     base = dict(data_dir=tmp_path, db_url=f"sqlite:///{tmp_path / 'navdeck.db'}", viewer=False)
     base.update(overrides)
     return Settings(**base)
+
+
+def twist(vx: float = 0.0, wz: float = 0.0, vy: float = 0.0) -> str:
+    """A teleop message as the dashboard sends it over the websocket."""
+    return json.dumps({"linear": {"x": vx, "y": vy, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
+
+
+def drive_until(ws, done, timeout: float = 15.0, vx: float = 0.0, vy: float = 0.0, wz: float = 0.0) -> bool:
+    """Send teleop commands at 10 Hz (the dashboard's rate) until ``done()`` (or ``timeout`` s), then a
+    stop: how far the robot got is the condition, not how long it drove, so a starved machine only
+    makes it take longer. Used by the hardware-path stack tests (emulators and the C firmware)."""
+    end = time.monotonic() + timeout
+    while not (reached := done()) and time.monotonic() < end:
+        ws.send(twist(vx, wz, vy))
+        time.sleep(0.1)
+    ws.send(twist())
+    return reached
 
 
 @pytest.fixture

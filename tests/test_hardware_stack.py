@@ -21,6 +21,7 @@ from pathlib import Path
 import httpx
 import pytest
 import serial
+from conftest import drive_until, twist
 from websockets.sync.client import connect
 
 from app.cli import main
@@ -64,27 +65,12 @@ def make_settings(tmp_path: Path, **overrides: object) -> Settings:
     return Settings(**{**base, **overrides})
 
 
-def twist(vx: float = 0.0, wz: float = 0.0, vy: float = 0.0) -> str:
-    return json.dumps({"linear": {"x": vx, "y": vy, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
-
-
 def drive(ws, seconds: float, vx: float = 0.0, wz: float = 0.0) -> None:
     """Send teleop commands at 10 Hz (the dashboard's rate) for ``seconds``."""
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         ws.send(twist(vx, wz))
         time.sleep(0.1)
-
-
-def drive_until(ws, done, timeout: float = 15.0, vx: float = 0.0, vy: float = 0.0, wz: float = 0.0) -> bool:
-    """Send teleop commands at 10 Hz until ``done()`` (or ``timeout`` s), then a stop: how far the robot
-    got is the condition, not how long it drove, so a starved machine only makes it take longer."""
-    end = time.monotonic() + timeout
-    while not (reached := done()) and time.monotonic() < end:
-        ws.send(twist(vx, wz, vy))
-        time.sleep(0.1)
-    ws.send(twist())
-    return reached
 
 
 def moved_beyond(pair: EmulatorPair, far: float, turn: bool = False):

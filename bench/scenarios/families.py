@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app.commands.sim_nav import SimNavResult, SimStack, drive
-from bench.scenarios.suite import _fresh
+from bench.scenarios.suite import fresh_stack
 from nav.planning import PlannerError
 from nav.types import Pose2D, Twist2D
 from robot.sim.people import MAX_SPEED, MIN_SPEED
@@ -184,7 +184,7 @@ def run_trial(
     paths = gen.walker_paths(rng, walkers, avoid=(start, goal)) if walkers else []
     for path in paths:
         world.people.add_loop(path, speed=float(rng.uniform(MIN_SPEED, min(1.0, MAX_SPEED))))
-    stack = _fresh(
+    stack = fresh_stack(
         gen.grid, start, seed * 1000 + i, controller=controller, profile=profile or gen.profile, world=world
     )
     contacts = ContactLog()
