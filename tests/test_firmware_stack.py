@@ -16,7 +16,7 @@ from pathlib import Path
 
 import httpx
 import pytest
-from conftest import drive_until, twist
+from conftest import teleop_until, twist
 from websockets.sync.client import connect
 
 from app.embedded import EmbeddedServer, serve_in_thread
@@ -70,7 +70,7 @@ def test_teleop_drives_the_c_base_unplug_faults_replug_recovers(
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         assert json.loads(ws.recv(timeout=10))["type"] == "hello"
         # odometry from the C firmware's encoder counts: straight ahead
-        assert drive_until(ws, lambda: session.odom_pose.x > 0.2, vx=0.2), session.fault
+        assert teleop_until(ws, lambda: session.odom_pose.x > 0.2, vx=0.2), session.fault
         assert session.fault is None, session.fault
         assert abs(session.odom_pose.y) < 0.02 and abs(session.odom_pose.theta) < 0.05, session.odom_pose
         assert session.health()["link"] == "ok"
@@ -93,5 +93,5 @@ def test_teleop_drives_the_c_base_unplug_faults_replug_recovers(
         # drives again on a fresh command (the key released first: a reset re-arms, never moves)
         ws.send(twist())
         before = session.odom_pose.x
-        assert drive_until(ws, lambda: session.odom_pose.x - before > 0.08, vx=0.2), session.fault
+        assert teleop_until(ws, lambda: session.odom_pose.x - before > 0.08, vx=0.2), session.fault
         assert session.fault is None, session.fault

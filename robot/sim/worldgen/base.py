@@ -21,6 +21,7 @@ import numpy as np
 from scipy.ndimage import label
 from scipy.spatial import cKDTree
 
+from maps.stock.generate import Canvas
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 from robot.profiles import load_profile
 from robot.sim.people import PERSON_RADIUS
@@ -210,3 +211,9 @@ def disc_mask(geometry: GridGeometry, centres: np.ndarray, radius: float) -> np.
     d, _ = cKDTree(np.asarray(centres, dtype=float)).query(pts, distance_upper_bound=radius + 1e-9)
     mask.ravel()[np.isfinite(d)] = True
     return mask
+
+
+def place_chair(c: Canvas, x: float, y: float, legs: list[tuple[float, float]]) -> None:
+    """``Canvas.chair`` at (x, y), its four legs' centres (0.2 m off the centre) added to ``legs``."""
+    c.chair(x, y)
+    legs.extend((x + dx, y + dy) for dx in (-0.2, 0.2) for dy in (-0.2, 0.2))
