@@ -1,13 +1,19 @@
-"""Shared fixtures: a real navdeck app (simulated robot, temporary SQLite) in-process or served."""
+"""Shared fixtures and helpers: a real navdeck app (simulated robot, temporary SQLite) in-process or
+served; teleop over its websocket and a control loop on a driver, for the hardware-path tests."""
 
 from __future__ import annotations
 
+import json
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from app.embedded import EmbeddedServer, serve_in_thread
+from nav.types import Twist2D
+from robot.base import Driver, SensorFrame
 
 ROOT = Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"
@@ -26,6 +32,40 @@ def make_settings(tmp_path: Path, **overrides):
     base = dict(data_dir=tmp_path, db_url=f"sqlite:///{tmp_path / 'navdeck.db'}", viewer=False)
     base.update(overrides)
     return Settings(**base)
+
+
+def twist(vx: float = 0.0, wz: float = 0.0, vy: float = 0.0) -> str:
+    """A teleop message as the dashboard sends it over the websocket."""
+    return json.dumps({"linear": {"x": vx, "y": vy, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
+
+
+def teleop_until(ws, done, timeout: float = 15.0, vx: float = 0.0, vy: float = 0.0, wz: float = 0.0) -> bool:
+    """Send teleop commands at 10 Hz (the dashboard's rate) until ``done()`` (or ``timeout`` s), then a
+    stop: how far the robot got is the condition, not how long it drove, so a starved machine only
+    makes it take longer. Used by the hardware-path stack tests (emulators and the C firmware)."""
+    end = time.monotonic() + timeout
+    while not (reached := done()) and time.monotonic() < end:
+        ws.send(twist(vx, wz, vy))
+        time.sleep(0.1)
+    ws.send(twist())
+    return reached
+
+
+def drive(d: Driver, cmd: Twist2D, seconds: float, period: float = 0.05) -> list[SensorFrame]:
+    """Run a 20 Hz control loop on a driver for ``seconds`` and return its frames (the serial driver
+    against the Python emulator and against the C firmware)."""
+    frames = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        d.command(cmd)
+        frames.append(d.read())
+        time.sleep(period)
+    return frames
+
+
+def last_ticks(frames: list[SensorFrame]) -> np.ndarray:
+    """The newest cumulative wheel counts among ``frames``."""
+    return next(f.ticks.counts for f in reversed(frames) if f.ticks is not None)
 
 
 @pytest.fixture

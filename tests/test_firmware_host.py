@@ -17,9 +17,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 import serial
+from conftest import drive, last_ticks
 
 from nav.types import Twist2D
-from robot.base import LinkState, SensorFrame
+from robot.base import LinkState
 from robot.firmware.build import CompilerMissingError, build
 from robot.firmware.host_base import HostFirmwareBase
 from robot.firmware.save_params import main as save_params_main
@@ -78,20 +79,6 @@ def driver(fw: HostFirmwareBase) -> Iterator[SerialDriver]:
     d = SerialDriver(SerialOptions(fw.path, link_timeout=1.0), SKID)
     yield d
     d.close()
-
-
-def drive(d: SerialDriver, cmd: Twist2D, seconds: float, period: float = 0.05) -> list[SensorFrame]:
-    frames = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        d.command(cmd)
-        frames.append(d.read())
-        time.sleep(period)
-    return frames
-
-
-def last_ticks(frames: list[SensorFrame]) -> np.ndarray:
-    return next(f.ticks.counts for f in reversed(frames) if f.ticks is not None)
 
 
 class RawLink:

@@ -24,6 +24,7 @@ from robot.serial.protocol import (
     Heartbeat,
     Message,
     MessageDecoder,
+    MsgType,
     ParamGet,
     ParamSave,
     ParamSet,
@@ -151,6 +152,9 @@ def test_every_python_message_type_has_the_same_size_in_c(c: VectorProgram) -> N
         assert c.ask(f"stream {wire}").startswith(f"{t:02x}:03:{body.hex()} good=1"), t
 
 
+VELOCITY_SIZE = VelocityCommand.FORMAT.size
+
+
 def test_streaming_receiver_counts_like_the_python_decoder(c: VectorProgram) -> None:
     """Garbage, truncation, bit flips, wrong versions, unknown types and oversize runs between good
     frames: the C receiver keeps the same good frames and the same drop counts as FrameDecoder."""
@@ -168,12 +172,12 @@ def test_streaming_receiver_counts_like_the_python_decoder(c: VectorProgram) -> 
                     frame[i] = 0x55
             elif kind == 2:  # truncated: the next delimiter ends it early
                 frame = frame[: int(rng.integers(1, len(frame)))] + b"\x00"
-            elif kind == 3:
-                frame = bytearray(encode_frame(0x01, k, b"\x00" * 12, version=2))
-            elif kind == 4:
+            elif kind == 3:  # a protocol version the receivers do not speak
+                frame = bytearray(encode_frame(MsgType.VELOCITY, k, b"\x00" * VELOCITY_SIZE, version=2))
+            elif kind == 4:  # an unknown type
                 frame = bytearray(encode_frame(0x55, k, b"abc"))
-            elif kind == 5:
-                frame = bytearray(encode_frame(0x01, k, b"\x01" * 11))
+            elif kind == 5:  # a known type with a body of the wrong size
+                frame = bytearray(encode_frame(MsgType.VELOCITY, k, b"\x01" * (VELOCITY_SIZE - 1)))
             elif kind == 6:  # line noise without delimiters longer than a frame
                 frame = bytearray(random_bytes(rng, int(rng.integers(200, 400)), 0.0)) + frame
             stream += frame

@@ -11,12 +11,12 @@ from __future__ import annotations
 import importlib
 import json
 import pkgutil
-import time
 from collections.abc import Iterator
 from pathlib import Path
 
 import httpx
 import pytest
+from conftest import teleop_until, twist
 from websockets.sync.client import connect
 
 from app.embedded import EmbeddedServer, serve_in_thread
@@ -42,21 +42,6 @@ def _built() -> None:
         build("navdeck_fw_host")
     except CompilerMissingError as exc:
         pytest.skip(f"the host firmware needs a C compiler: {exc}")
-
-
-def twist(vx: float = 0.0, wz: float = 0.0) -> str:
-    return json.dumps({"linear": {"x": vx, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
-
-
-def drive_until(ws, done, timeout: float = 15.0, vx: float = 0.0, wz: float = 0.0) -> bool:
-    """Teleop at the dashboard's 10 Hz until ``done()`` (or ``timeout`` s), then a stop: how far the
-    robot got is the condition, not how long it drove, so a starved machine only takes longer."""
-    end = time.monotonic() + timeout
-    while not (reached := done()) and time.monotonic() < end:
-        ws.send(twist(vx, wz))
-        time.sleep(0.1)
-    ws.send(twist())
-    return reached
 
 
 @pytest.fixture
@@ -85,7 +70,7 @@ def test_teleop_drives_the_c_base_unplug_faults_replug_recovers(
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         assert json.loads(ws.recv(timeout=10))["type"] == "hello"
         # odometry from the C firmware's encoder counts: straight ahead
-        assert drive_until(ws, lambda: session.odom_pose.x > 0.2, vx=0.2), session.fault
+        assert teleop_until(ws, lambda: session.odom_pose.x > 0.2, vx=0.2), session.fault
         assert session.fault is None, session.fault
         assert abs(session.odom_pose.y) < 0.02 and abs(session.odom_pose.theta) < 0.05, session.odom_pose
         assert session.health()["link"] == "ok"
@@ -108,5 +93,5 @@ def test_teleop_drives_the_c_base_unplug_faults_replug_recovers(
         # drives again on a fresh command (the key released first: a reset re-arms, never moves)
         ws.send(twist())
         before = session.odom_pose.x
-        assert drive_until(ws, lambda: session.odom_pose.x - before > 0.08, vx=0.2), session.fault
+        assert teleop_until(ws, lambda: session.odom_pose.x - before > 0.08, vx=0.2), session.fault
         assert session.fault is None, session.fault

@@ -21,6 +21,7 @@ from pathlib import Path
 import httpx
 import pytest
 import serial
+from conftest import teleop_until, twist
 from websockets.sync.client import connect
 
 from app.cli import main
@@ -64,10 +65,6 @@ def make_settings(tmp_path: Path, **overrides: object) -> Settings:
     return Settings(**{**base, **overrides})
 
 
-def twist(vx: float = 0.0, wz: float = 0.0, vy: float = 0.0) -> str:
-    return json.dumps({"linear": {"x": vx, "y": vy, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": wz}})
-
-
 def drive(ws, seconds: float, vx: float = 0.0, wz: float = 0.0) -> None:
     """Send teleop commands at 10 Hz (the dashboard's rate) for ``seconds``."""
     end = time.monotonic() + seconds
@@ -76,19 +73,8 @@ def drive(ws, seconds: float, vx: float = 0.0, wz: float = 0.0) -> None:
         time.sleep(0.1)
 
 
-def drive_until(ws, done, timeout: float = 15.0, vx: float = 0.0, vy: float = 0.0, wz: float = 0.0) -> bool:
-    """Send teleop commands at 10 Hz until ``done()`` (or ``timeout`` s), then a stop: how far the robot
-    got is the condition, not how long it drove, so a starved machine only makes it take longer."""
-    end = time.monotonic() + timeout
-    while not (reached := done()) and time.monotonic() < end:
-        ws.send(twist(vx, wz, vy))
-        time.sleep(0.1)
-    ws.send(twist())
-    return reached
-
-
 def moved_beyond(pair: EmulatorPair, far: float, turn: bool = False):
-    """A ``drive_until`` condition: the robot turned ``far`` rad (``turn``) or went ``far`` m from here."""
+    """A ``teleop_until`` condition: the robot turned ``far`` rad (``turn``) or went ``far`` m from here."""
     before = pair.pump.truth_pose
 
     def done() -> bool:
@@ -161,7 +147,7 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
     truth0 = pair.pump.truth_pose
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         assert hello(ws)["driving"] is True
-        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(truth0) > 0.15, vx=0.2)
+        assert teleop_until(ws, lambda: pair.pump.truth_pose.distance_to(truth0) > 0.15, vx=0.2)
         assert session.modes.mode.value == "teleop", session.fault
         assert session.fault is None, session.fault
         # odometry from the serial encoder counts follows the emulated robot's true motion
@@ -174,7 +160,7 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
         assert session.last_scan is not None and session.health()["scan_age_s"] < 1.0
         # the robot turns too, and the gyro-fused heading follows the truth
         th0 = session.odom_pose.theta
-        assert drive_until(ws, lambda: session.odom_pose.theta - th0 > 0.3, wz=0.8)
+        assert teleop_until(ws, lambda: session.odom_pose.theta - th0 > 0.3, wz=0.8)
 
         r = httpx.post(f"{server.url}/api/robot/estop", timeout=10)
         assert r.status_code == 200 and r.json()["mode"] == "estop"
@@ -195,7 +181,7 @@ def test_teleop_drives_the_emulated_robot_and_estop_reaches_the_base(
         assert commands_seen(pair, Reset)
         # drives again after the reset, on a fresh command (the key released first)
         ws.send(twist())
-        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(resting) > 0.03, vx=0.15)
+        assert teleop_until(ws, lambda: pair.pump.truth_pose.distance_to(resting) > 0.03, vx=0.15)
 
 
 def test_unplug_faults_and_stops_then_replug_recovers(
@@ -206,7 +192,7 @@ def test_unplug_faults_and_stops_then_replug_recovers(
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         hello(ws)
         start = pair.pump.truth_pose
-        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(start) > 0.03, vx=0.15)
+        assert teleop_until(ws, lambda: pair.pump.truth_pose.distance_to(start) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
         pair.base.unplug()
         assert wait_for(lambda: session.modes.mode.value == "fault", timeout=3.0, period=0.005)
@@ -236,7 +222,7 @@ def test_unplug_faults_and_stops_then_replug_recovers(
         # and the robot can be driven again, on a fresh command
         ws.send(twist())
         before = pair.pump.truth_pose
-        assert drive_until(ws, lambda: pair.pump.truth_pose.distance_to(before) > 0.03, vx=0.15)
+        assert teleop_until(ws, lambda: pair.pump.truth_pose.distance_to(before) > 0.03, vx=0.15)
         assert session.modes.mode.value == "teleop"
 
 
@@ -348,7 +334,7 @@ def test_maps_over_the_hardware_path(pair: EmulatorPair, patient_server: Embedde
             assert json.loads(ws.recv(timeout=10))["driving"]
             # as far as 3 s, 1.5 s and 2 s of driving take an unloaded machine
             for move, far in ((dict(vx=0.2), 0.5), (dict(wz=0.8), 1.0), (dict(vx=0.2), 0.35)):
-                assert drive_until(ws, moved_beyond(pair, far, "wz" in move), **move), rt.session.fault
+                assert teleop_until(ws, moved_beyond(pair, far, "wz" in move), **move), rt.session.fault
         assert pair.pump.truth_pose.distance_to(Pose2D()) > 0 and rt.session.fault is None, rt.session.fault
         state = api.get("/api/mapping").json()
         r = api.post("/api/mapping/stop")
@@ -393,7 +379,7 @@ def test_each_kinematics_is_served_over_the_emulators_and_driven_by_teleop(tmp_p
                 for move in moves:
                     before = pair.pump.truth_pose
                     turn = "wz" in move
-                    reached = drive_until(ws, moved_beyond(pair, 0.4 if turn else 0.12, turn), **move)
+                    reached = teleop_until(ws, moved_beyond(pair, 0.4 if turn else 0.12, turn), **move)
                     assert reached and session.fault is None, (move, session.fault)
                     assert session.modes.mode.value == "teleop"
                     moved = settled(pair).relative_to(before)
@@ -426,7 +412,7 @@ def test_a_key_held_through_a_reset_does_not_move_the_robot(
     session = server.runtime.session
     with connect(f"{server.ws_url}/ws/teleop") as ws:
         hello(ws)
-        assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)
+        assert teleop_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)
         assert httpx.post(f"{server.url}/api/robot/estop", timeout=10).status_code == 200
         ws.send(twist(wz=0.6))  # held
         assert json.loads(ws.recv(timeout=10))["mode"] == "estop"
@@ -448,7 +434,7 @@ def test_a_key_held_through_a_reset_does_not_move_the_robot(
         ]
         assert all(m.vx == 0.0 and m.wz == 0.0 for m in velocities)
         ws.send(twist())  # released ...
-        assert drive_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)  # ... pressed again: it turns
+        assert teleop_until(ws, moved_beyond(pair, 0.2, turn=True), wz=0.6)  # ... pressed again: it turns
 
 
 def test_a_base_without_a_lidar_drives_by_teleop_and_refuses_mapping_and_navigation(tmp_path: Path) -> None:
@@ -467,7 +453,7 @@ def test_a_base_without_a_lidar_drives_by_teleop_and_refuses_mapping_and_navigat
             assert set(state["allowed_modes"]) & {"mapping", "localizing", "navigating"} == set()
             with connect(f"{server.ws_url}/ws/teleop") as ws:
                 assert hello(ws)["driving"] is True
-                assert drive_until(ws, moved_beyond(pair, 0.1), vx=0.15), session.fault
+                assert teleop_until(ws, moved_beyond(pair, 0.1), vx=0.15), session.fault
                 assert session.fault is None
             for path, body in [
                 ("/api/robot/mode", {"mode": "mapping"}),

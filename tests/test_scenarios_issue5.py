@@ -68,11 +68,11 @@ def test_amcl_does_not_settle_inside_the_l_corridors_solid_core() -> None:
     round it reaches into the L's solid 6 x 6 m core, where every beam endpoint lands on an
     occupied cell (a perfect likelihood-field fit). The first update used to jump 1.9 m into the
     wall and the planner failed with StartOccupied; a particle inside a wall now gets no weight."""
-    from bench.scenarios.suite import _fresh, _l_corridor
+    from bench.scenarios.suite import _l_corridor, fresh_stack
     from nav.types import Pose2D
 
     start = Pose2D(6.636241941941821, 1.0759038774518521, np.pi)
-    stack = _fresh(_l_corridor(), start, 34, controller="teb")
+    stack = fresh_stack(_l_corridor(), start, 34, controller="teb")
     try:
         s = stack.session
         for _ in range(3):

@@ -13,6 +13,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 import serial
+from conftest import drive, last_ticks
 
 from nav.types import Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
@@ -71,17 +72,6 @@ def strict_driver(pair: EmulatorPair) -> Iterator[SerialDriver]:
     d.close()
 
 
-def drive(d: SerialDriver, cmd: Twist2D, seconds: float, period: float = 0.05) -> list[SensorFrame]:
-    """Run a 20 Hz control loop for ``seconds`` and return its frames."""
-    frames = []
-    end = time.monotonic() + seconds
-    while time.monotonic() < end:
-        d.command(cmd)
-        frames.append(d.read())
-        time.sleep(period)
-    return frames
-
-
 def drive_until(
     d: SerialDriver, cmd: Twist2D, done, timeout: float = 30.0, period: float = 0.05
 ) -> list[SensorFrame]:
@@ -95,10 +85,6 @@ def drive_until(
             return frames
         assert time.monotonic() < end, f"not done after {timeout} s: {frames[-1]}"
         time.sleep(period)
-
-
-def last_ticks(frames: list[SensorFrame]) -> np.ndarray:
-    return next(f.ticks.counts for f in reversed(frames) if f.ticks is not None)
 
 
 def ticks_beyond(limit: float, sign: float = 1.0):

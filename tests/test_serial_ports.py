@@ -16,7 +16,7 @@ from robot.serial.emulate import EmulatorPair
 from robot.serial.port import open_port
 from robot.serial.probe import LIDAR_MOTION_REQUESTS, _param_get_frame, list_devices, probe
 from robot.serial.protocol import MessageDecoder, ParamGet, VelocityCommand
-from robot.serial.rplidar import Cmd
+from robot.serial.rplidar import Cmd, request
 
 PROFILE = load_profile("skid4")
 
@@ -53,7 +53,7 @@ def test_param_get_frame_is_a_valid_frame_and_no_lidar_motion_request() -> None:
     frame = _param_get_frame()
     assert [type(m) for m in MessageDecoder().feed(frame)] == [ParamGet]
     for cmd in LIDAR_MOTION_REQUESTS:
-        assert bytes((0xA5, int(cmd))) not in frame
+        assert request(cmd) not in frame
 
 
 def test_silent_and_busy_ports(pair: EmulatorPair, capsys) -> None:

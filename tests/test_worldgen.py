@@ -14,7 +14,7 @@ from scipy.ndimage import distance_transform_edt, label
 
 from bench.scenarios import family_bench
 from bench.scenarios.families import ContactLog, FamilySet, run_trial
-from bench.scenarios.suite import _fresh
+from bench.scenarios.suite import fresh_stack
 from nav.types import Pose2D, Twist2D
 from robot.profiles import load_profile
 from robot.sim import World
@@ -157,7 +157,7 @@ def test_unknown_family_is_a_clear_error() -> None:
 
 
 def _idle_stack(world: World, start: Pose2D):
-    return _fresh(world.grid, start, seed=1, safety=False, world=world)
+    return fresh_stack(world.grid, start, seed=1, safety=False, world=world)
 
 
 def test_contact_with_a_moving_robot_counts_once_per_contact() -> None:

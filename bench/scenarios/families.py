@@ -17,6 +17,7 @@ Trial ``i`` of a set is a function of (seed, i) alone, so ``only`` reruns one fa
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -24,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from app.commands.sim_nav import SimNavResult, SimStack, drive
-from bench.scenarios.suite import _fresh
+from bench.scenarios.suite import fresh_stack
 from nav.planning import PlannerError
 from nav.types import Pose2D, Twist2D
 from robot.sim.people import MAX_SPEED, MIN_SPEED
@@ -159,11 +160,8 @@ def _route_timeout(stack: SimStack, start: Pose2D, goal: Pose2D) -> float:
     route = start.distance_to(goal)
     cm = stack.navigation.global_costmap
     if cm is not None:
-        try:
-            seg = np.diff(np.asarray(stack.navigation.planner.plan(cm, start, goal).poses)[:, :2], axis=0)
-            route = float(np.hypot(seg[:, 0], seg[:, 1]).sum())
-        except PlannerError:
-            pass
+        with contextlib.suppress(PlannerError):
+            route = stack.navigation.planner.plan(cm, start, goal).length
     return 60.0 + 3.0 * route / stack.driver.profile.limits.max_vel_x
 
 
@@ -184,7 +182,7 @@ def run_trial(
     paths = gen.walker_paths(rng, walkers, avoid=(start, goal)) if walkers else []
     for path in paths:
         world.people.add_loop(path, speed=float(rng.uniform(MIN_SPEED, min(1.0, MAX_SPEED))))
-    stack = _fresh(
+    stack = fresh_stack(
         gen.grid, start, seed * 1000 + i, controller=controller, profile=profile or gen.profile, world=world
     )
     contacts = ContactLog()

@@ -29,8 +29,8 @@ from bench.scenarios.suite import (
     SetOptions,
     SetResult,
     TrialResult,
-    _fresh,
     _timed,
+    fresh_stack,
 )
 from nav.types import OccupancyGrid, Pose2D
 
@@ -178,7 +178,7 @@ def kidnap_trials(
             start, goal = next(trials)
             if o.only is not None and k not in o.only:
                 continue
-            stack = _fresh(
+            stack = fresh_stack(
                 grid,
                 start,
                 o.seed * 1000 + k,

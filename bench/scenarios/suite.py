@@ -33,6 +33,7 @@ import numpy as np
 
 from app.commands.sim_nav import SimNavResult, SimStack, build_sim_stack, drive
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
+from robot.safety import SafetyFilter
 from robot.sim import World
 
 
@@ -123,7 +124,7 @@ def _l_corridor() -> OccupancyGrid:
     return _grid_from_mask(occ, res)
 
 
-def _fresh(
+def fresh_stack(
     grid: OccupancyGrid,
     start: Pose2D,
     seed: int,
@@ -134,14 +135,15 @@ def _fresh(
     profile: str = "skid4",
     world: World | None = None,
 ) -> SimStack:
+    """A new simulated robot at ``start`` (AMCL told the true start, the server's safety filter
+    unless ``safety`` is off) in ``world`` or a copy of ``grid`` with ``obstacles`` added: every
+    trial of every bench set (suite, kidnap, families) and the tests' one-off drives start here."""
     if world is None:
         world = World(OccupancyGrid(grid.geometry, grid.data.copy()), name="trial", start_pose=start)
     for poly in obstacles:
         world.add_polygon(poly)
     stack = build_sim_stack(grid, world, start, seed=seed, controller=controller, profile=profile)
     if safety:
-        from robot.safety import SafetyFilter
-
         stack.session.safety = SafetyFilter(stack.driver.profile)
     stack.localization.set_initial_pose(start)
     return stack
@@ -192,7 +194,7 @@ def _run_set(
         for i, trial in enumerate(trials):
             if o.only is not None and i not in o.only:
                 continue
-            stack = _fresh(
+            stack = fresh_stack(
                 grid,
                 trial.start,
                 o.seed * 1000 + i,

@@ -2,39 +2,30 @@
 
 PARAM_SET (what ``navdeck calibrate --set-firmware`` sends) changes the values in the base's RAM
 only; this sends PARAM_SAVE, which writes every parameter now in effect to flash, and waits for the
-base's answer. Run it with the server stopped (it opens the port exclusively, as the server does).
+base's answer: the save ``navdeck calibrate`` offers (``SerialDriver.save_params``), done later. Run
+it with the server stopped (it opens the port exclusively, as the server does).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import time
 
-from robot.serial.port import PortUnavailableError, SerialLinkError, open_port
-from robot.serial.protocol import PARAM_SAVE_ID, MessageDecoder, ParamSave, ParamStatus, ParamValue, encode
+from robot.clock import RealClock
+from robot.serial.driver import BaseLink, SerialOptions
+from robot.serial.port import PortUnavailableError, SerialLinkError
+from robot.serial.protocol import ParamValue
 
 
 def save_parameters(port: str, baud: int = 115200, timeout: float = 1.0) -> ParamValue:
-    """Send PARAM_SAVE on ``port`` and return the base's answer; raise ``SerialLinkError`` (one line)
-    when it refuses or does not answer within ``timeout`` s."""
-    with open_port(port, baud) as ser:
-        decoder = MessageDecoder()
-        ser.write(encode(ParamSave(), 0))
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            for msg in decoder.feed(ser.read(4096)):
-                if isinstance(msg, ParamValue) and msg.param_id == PARAM_SAVE_ID:
-                    if msg.status != ParamStatus.OK:
-                        raise SerialLinkError(
-                            f"the base on {port} could not write its flash: {ParamStatus(msg.status).name}"
-                        )
-                    return msg
-    heard = "it sends telemetry" if decoder.good else "nothing came back"
-    raise SerialLinkError(
-        f"no answer to PARAM_SAVE from {port} within {timeout:.1f} s ({heard}): a firmware older than "
-        "PARAM_SAVE cannot persist parameters"
-    )
+    """Send PARAM_SAVE on ``port`` through the server's own base link (``BaseLink.save_params``) and
+    return the base's answer; raise ``SerialLinkError`` (one line) when it refuses or does not answer
+    within ``timeout`` s."""
+    link = BaseLink(SerialOptions(port, baud=baud), RealClock())
+    try:
+        return link.save_params(timeout)
+    finally:
+        link.close()
 
 
 def main(argv: list[str] | None = None) -> int:

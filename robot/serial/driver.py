@@ -424,6 +424,42 @@ class BaseLink:
     def send(self, msg) -> bool:
         return self._send(msg)
 
+    def ask_param(self, msg: ParamSet | ParamSave, answer_id: int, timeout: float) -> ParamValue:
+        """Send ``msg`` and wait for the PARAM_VALUE answer carrying ``answer_id`` (whatever its
+        status). Raises ``SerialLinkError`` when the port is gone or no answer comes in ``timeout`` s."""
+        port = self.options.port
+        what = f"{msg.TYPE.name} {answer_id}" if isinstance(msg, ParamSet) else msg.TYPE.name
+        with self._lock:
+            self.params.pop(answer_id, None)
+        if not self.send(msg):
+            raise SerialLinkError(f"cannot send {what}: base port {port} is gone")
+        end = time.monotonic() + timeout
+        while (reply := self.params.get(answer_id)) is None:
+            if time.monotonic() > end:
+                heard = "it sends telemetry" if self._decoder.good else "nothing came back"
+                older = (
+                    ": a firmware older than PARAM_SAVE cannot persist parameters"
+                    if isinstance(msg, ParamSave)
+                    else ""
+                )
+                raise SerialLinkError(
+                    f"no answer to {what} from {port} within {timeout:.1f} s ({heard}){older}"
+                )
+            time.sleep(0.005)
+        return reply
+
+    def save_params(self, timeout: float = 2.0) -> ParamValue:
+        """PARAM_SAVE: the base writes every parameter now in effect to flash; its answer's ``value``
+        is the number written. Raises ``SerialLinkError`` when it does not answer (a firmware without
+        PARAM_SAVE) or the flash write failed. ``SerialDriver`` and ``robot.firmware.save_params``
+        both save through here."""
+        reply = self.ask_param(ParamSave(), PARAM_SAVE_ID, timeout)
+        if reply.status != ParamStatus.OK:
+            raise SerialLinkError(
+                f"the base on {self.options.port} could not write its flash: {ParamStatus(reply.status).name}"
+            )
+        return reply
+
     def close(self) -> None:
         self._stop.set()
         self._send(VelocityCommand(0.0, 0.0, 0.0))
@@ -564,7 +600,7 @@ class SerialDriver:
         lives in the base's RAM until ``save_params``.
 
         Raises ``SerialLinkError`` when no answer comes within ``timeout`` s or the base refuses."""
-        reply = self._ask_param(ParamSet(int(param_id), float(value)), int(param_id), timeout)
+        reply = self._base.ask_param(ParamSet(int(param_id), float(value)), int(param_id), timeout)
         if reply.status != ParamStatus.OK:
             raise SerialLinkError(
                 f"the base refused parameter {param_id} = {value:g}: {ParamStatus(reply.status).name}"
@@ -573,27 +609,8 @@ class SerialDriver:
 
     def save_params(self, timeout: float = 2.0) -> ParamValue:
         """PARAM_SAVE: the base writes every parameter now in effect to flash, so they survive a
-        reboot; its answer's ``value`` is the number written. Raises ``SerialLinkError`` when it does
-        not answer (a firmware without PARAM_SAVE) or the flash write failed."""
-        reply = self._ask_param(ParamSave(), PARAM_SAVE_ID, timeout)
-        if reply.status != ParamStatus.OK:
-            raise SerialLinkError(f"the base could not write its flash: {ParamStatus(reply.status).name}")
-        return reply
-
-    def _ask_param(self, msg: ParamSet | ParamSave, answer_id: int, timeout: float) -> ParamValue:
-        """Send ``msg`` and wait for the PARAM_VALUE answer carrying ``answer_id``."""
-        base = self._base
-        what = f"{msg.TYPE.name} {answer_id}" if isinstance(msg, ParamSet) else msg.TYPE.name
-        with base._lock:
-            base.params.pop(answer_id, None)
-        if not base.send(msg):
-            raise SerialLinkError(f"cannot send {what}: base port {self.options.port} is gone")
-        end = time.monotonic() + timeout
-        while (reply := base.params.get(answer_id)) is None:
-            if time.monotonic() > end:
-                raise SerialLinkError(f"the base did not answer {what} within {timeout:.1f} s")
-            time.sleep(0.005)
-        return reply
+        reboot (``BaseLink.save_params``)."""
+        return self._base.save_params(timeout)
 
     @property
     def refused_commands(self) -> int:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import os
 import time
+from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -93,12 +94,14 @@ def _param_get_frame() -> bytes:
     """A PARAM_GET frame that holds no RPLidar request able to start its motor or a scan."""
     for seq in range(256):
         frame = encode(ParamGet(int(ParamId.TELEMETRY_RATE)), seq)
-        if not any(bytes((0xA5, int(c))) in frame for c in LIDAR_MOTION_REQUESTS):
+        if not any(request(c) in frame for c in LIDAR_MOTION_REQUESTS):
             return frame
     raise RuntimeError("no safe PARAM_GET frame")  # unreachable: the sequence byte changes the CRC
 
 
-def _read_for(ser: serial.Serial, seconds: float, feed, done) -> None:
+def _read_for(
+    ser: serial.Serial, seconds: float, feed: Callable[[bytes], object], done: Callable[[], bool]
+) -> None:
     end = time.monotonic() + seconds
     while time.monotonic() < end and not done():
         data = ser.read(max(1, ser.in_waiting))

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from maps.stock.generate import WALL, Canvas
-from robot.sim.worldgen.base import GeneratedWorld
+from robot.sim.worldgen.base import GeneratedWorld, place_chair
 
 PROFILE = "skid4"
 CHAIR_OFFSET = 0.45
@@ -51,8 +51,7 @@ def _furnish(
         for k in range(int(rng.integers(2, 5))):
             cx = x0 + w * (0.3 if k % 2 == 0 else 0.7)
             cy = y0 - CHAIR_OFFSET if k < 2 else y0 + d + CHAIR_OFFSET
-            c.chair(cx, cy)
-            legs.extend((cx + dx, cy + dy) for dx in (-0.2, 0.2) for dy in (-0.2, 0.2))
+            place_chair(c, cx, cy, legs)
             chairs += 1
         break
     for _ in range(30):

@@ -18,13 +18,14 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.ndimage import distance_transform_edt, label
+from scipy.ndimage import label
 from scipy.spatial import cKDTree
 
+from maps.stock.generate import Canvas
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 from robot.profiles import load_profile
 from robot.sim.people import PERSON_RADIUS
-from robot.sim.world import World, polygon_mask
+from robot.sim.world import World
 
 EIGHT_CONNECTED = np.ones((3, 3), dtype=bool)
 
@@ -65,11 +66,9 @@ class GeneratedWorld:
     """Metres of room beyond the circumscribed radius around a start or goal (to turn in place)."""
 
     def __post_init__(self) -> None:
-        occ = self.grid.data >= 65
-        for poly in self.unmapped:
-            occ = occ | polygon_mask(self.geometry, poly)
-        self.occupied = occ
-        self.clearance = distance_transform_edt(~occ) * self.geometry.resolution
+        world = self.world()  # the simulator's static obstacles: the map plus the unmapped polygons
+        self.occupied = world.static_occupied
+        self.clearance = world.clearance_map
         self.robot_radius = load_profile(self.profile).circumscribed_radius
         self.passable = self.clearance >= self.robot_radius + self.geometry.resolution
         labels, count = label(self.passable, structure=EIGHT_CONNECTED)
@@ -212,3 +211,9 @@ def disc_mask(geometry: GridGeometry, centres: np.ndarray, radius: float) -> np.
     d, _ = cKDTree(np.asarray(centres, dtype=float)).query(pts, distance_upper_bound=radius + 1e-9)
     mask.ravel()[np.isfinite(d)] = True
     return mask
+
+
+def place_chair(c: Canvas, x: float, y: float, legs: list[tuple[float, float]]) -> None:
+    """``Canvas.chair`` at (x, y), its four legs' centres (0.2 m off the centre) added to ``legs``."""
+    c.chair(x, y)
+    legs.extend((x + dx, y + dy) for dx in (-0.2, 0.2) for dy in (-0.2, 0.2))

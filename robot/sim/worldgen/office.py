@@ -9,7 +9,7 @@ import itertools
 import numpy as np
 
 from maps.stock.generate import WALL, Canvas
-from robot.sim.worldgen.base import GeneratedWorld
+from robot.sim.worldgen.base import GeneratedWorld, place_chair
 
 PROFILE = "skid4"
 DOOR = 0.9
@@ -66,8 +66,7 @@ def generate(seed: int) -> GeneratedWorld:
             desk = (y0, y0 + 0.8) if lower else (y1 - 0.8, y1)
             c.box(dx0, desk[0], dx0 + dw, desk[1])
             cx, cy = dx0 + dw / 2, desk[1] + 0.45 if lower else desk[0] - 0.45
-            c.chair(cx, cy)
-            legs.extend((cx + dx, cy + dy) for dx in (-0.2, 0.2) for dy in (-0.2, 0.2))
+            place_chair(c, cx, cy, legs)
             cab = (b - 1.2, b - 0.1) if left else (a + 0.1, a + 1.2)
             c.box(cab[0], y0 if lower else y1 - 0.45, cab[1], y0 + 0.45 if lower else y1)
     pillars = []
