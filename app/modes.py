@@ -167,7 +167,10 @@ class ModeMachine:
         """Leave ESTOP or FAULT for IDLE; ``blocked_by`` names a fault that is still present."""
         with self._lock:
             if self._mode not in (Mode.ESTOP, Mode.FAULT):
-                raise self._refuse("idle", f"nothing to reset in mode {self._mode.value}")
+                raise self._refuse(
+                    "idle",
+                    f"nothing to reset in mode {self._mode.value}: Reset releases an e-stop or a fault",
+                )
             if blocked_by:
                 raise self._refuse("idle", f"cannot reset: {blocked_by}")
             self._set(Mode.IDLE, "reset")
