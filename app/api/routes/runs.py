@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import contextlib
 from datetime import date, datetime, time, timedelta
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, WebSocket
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
+from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel, get_runtime
+from app.api.schemas import ERRORS, OpenOut, Out, Page, Timestamp
 from app.export.data import RunData, load_run
 from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, utc_aware
 from app.runtime import Runtime
@@ -21,8 +23,107 @@ Kind = Literal["teleop", "mapping", "navigation"]
 Outcome = Literal["recording", "completed", "succeeded", "failed", "aborted", "stopped", "interrupted"]
 assert set(Kind.__args__) == set(KINDS) and set(Outcome.__args__) == set(OUTCOMES)  # type: ignore[attr-defined]
 
-NOT_FOUND = {404: {"description": "no such run"}}
-RECORDING = {409: {"description": "the run is still recording"}}
+NOT_FOUND = ERRORS(s404="no such run")
+RECORDING = ERRORS(s409="the run is still recording")
+NO_RECORDING = ERRORS(s503="run recording is not enabled on this server")
+
+
+class RunOut(Out):
+    """A recorded run. Times inside a run (``t`` of events, goals, samples) are seconds since it started."""
+
+    id: int
+    kind: Kind
+    robot: str
+    robot_id: int | None
+    profile_name: str = Field(description="the robot profile it ran with")
+    map_id: int | None
+    started_at: Timestamp
+    ended_at: Timestamp | None
+    outcome: Outcome
+    end_reason: str
+    duration_s: float
+    distance_m: float
+    summary: dict[str, Any] = Field(description="metrics of the run (distance, goals reached...)")
+
+
+class RunEventOut(OpenOut):
+    """One event; its other fields depend on ``type``."""
+
+    t: float = Field(description="s since the run started")
+    type: str
+
+
+class RunGoalOut(Out):
+    t: float = Field(description="s since the run started")
+    t_end: float | None = Field(description="s since the run started, when it ended")
+    x: float = Field(description="m")
+    y: float = Field(description="m")
+    theta: float = Field(description="rad")
+    outcome: str = Field(description="`pending`, `succeeded`, `failed` or `canceled`")
+    reason: str
+
+
+class RunDetail(RunOut):
+    events: list[RunEventOut]
+    goals: list[RunGoalOut]
+    plans: int
+    scans: int
+    maps: int
+
+
+class RunMapGeometry(Out):
+    resolution: float = Field(description="m per cell")
+    width: int
+    height: int
+    origin: tuple[float, float, float] = Field(description="x (m), y (m), yaw (rad)")
+    image_url: str
+
+
+class TrajectoryOut(Out):
+    run_id: int
+    count: int = Field(description="samples in the range, before decimation")
+    step: int = Field(description="every step-th sample is returned")
+    samples: dict[str, list[Any]] = Field(description="columns: t (s since the run started), x, y...")
+    map: RunMapGeometry | None = None
+
+
+class ScanAt(Out):
+    t: float = Field(description="s since the run started")
+    points: list[tuple[float, float]] = Field(description="map frame, m")
+
+
+class PlanAt(Out):
+    t: float = Field(description="s since the run started")
+    poses: list[tuple[float, float]] = Field(description="map frame, m")
+
+
+class RunStateOut(Out):
+    t: float = Field(description="s since the run started")
+    pose: tuple[float, float, float] = Field(description="x (m), y (m), theta (rad), map frame")
+    velocity: tuple[float, float, float] = Field(description="vx, vy (m/s), wz (rad/s)")
+    command: tuple[float, float, float] = Field(description="vx, vy (m/s), wz (rad/s)")
+    mode: str
+    behavior: str | None
+    scan: ScanAt | None = None
+    plan: PlanAt | None = None
+
+
+class ReplayOut(Out):
+    run_id: int | None
+    t: float = Field(description="s since the run started")
+    duration: float = Field(description="s")
+    playing: bool
+    speed: float = Field(description="playback speed factor")
+    viewer: bool
+
+
+def run_out(d: dict[str, Any]) -> dict[str, Any]:
+    """The store's run dict under the API's names (``profile`` is the profile object elsewhere)."""
+    out = dict(d)
+    out["profile_name"] = out.pop("profile", "")
+    return out
+
+
 PARTIAL_HEADER = "X-Run-Partial"
 PARTIAL = {
     PARTIAL_HEADER: {
@@ -76,7 +177,11 @@ def _found(fn, *args):
         raise HTTPException(404, f"no run with id {args[0]}") from None
 
 
-@router.get("/api/runs", summary="Recorded runs, newest first, with filters and pagination")
+@router.get(
+    "/api/runs",
+    response_model=Page[RunOut],
+    summary="Recorded runs, newest first, with filters and pagination",
+)
 def list_runs(
     store: StoreDep,
     kind: Kind | None = None,
@@ -92,17 +197,23 @@ def list_runs(
     if t0 is not None and t1 is not None and t1 <= t0:
         raise _bad("until", "must be after since")
     total, items = store.list(RunFilters(kind, outcome, map_id, robot, t0, t1), limit, offset)
-    return {"total": total, "limit": limit, "offset": offset, "items": items}
+    return {"total": total, "limit": limit, "offset": offset, "items": [run_out(r) for r in items]}
 
 
-@router.get("/api/runs/{run_id}", summary="One run: summary metrics, events, goals", responses=NOT_FOUND)
+@router.get(
+    "/api/runs/{run_id}",
+    response_model=RunDetail,
+    summary="One run: summary metrics, events, goals",
+    responses=NOT_FOUND,
+)
 def get_run(run_id: int, store: StoreDep) -> dict:
-    return _found(store.detail, run_id)
+    return run_out(_found(store.detail, run_id))
 
 
 @router.get(
     "/api/runs/{run_id}/trajectory",
     summary="Trajectory samples as columns (decimated to max_points), with the run's map geometry",
+    response_model=TrajectoryOut,
     responses=NOT_FOUND,
 )
 def trajectory(
@@ -151,6 +262,7 @@ def run_map_png(run_id: int, store: StoreDep) -> Response:
 @router.get(
     "/api/runs/{run_id}/state",
     summary="Replay seek: the run as it was at time t (pose, speeds, scan points, plan, goal)",
+    response_model=RunStateOut,
     responses=NOT_FOUND,
 )
 def state_at(
@@ -264,12 +376,17 @@ class ReplayCommand(StrictModel):
     speed: float | None = None
 
 
-@router.get("/api/replay", summary="Replay player state")
+@router.get("/api/replay", response_model=ReplayOut, summary="Replay player state", responses=NO_RECORDING)
 def replay_state(rt: RuntimeDep) -> dict:
     return _recording(rt).replay.state()
 
 
-@router.post("/api/replay", summary="Control the replay in the 3D view (served at /replay/viz/)")
+@router.post(
+    "/api/replay",
+    response_model=ReplayOut,
+    summary="Control the replay in the 3D view (served at /replay/viz/)",
+    responses={**NOT_FOUND, **ERRORS(s409="the player refused (no run loaded...)"), **NO_RECORDING},
+)
 def replay_control(cmd: ReplayCommand, rt: RuntimeDep) -> dict:
     from app.runs.replay import ReplayError
 
