@@ -4,7 +4,6 @@ rename, delete, activate (in-process app, simulated robot)."""
 from __future__ import annotations
 
 import re
-
 from pathlib import Path
 
 import numpy as np
@@ -193,7 +192,8 @@ def test_images_and_activation(client) -> None:
     page = client.get("/api/maps", params={"limit": 500}).json()
     world = next(m for m in page["items"] if m["active"])
     copy = upload(
-        client, client.get(f"/api/maps/{world['id']}/map.yaml").content,
+        client,
+        client.get(f"/api/maps/{world['id']}/map.yaml").content,
         client.get(f"/api/maps/{world['id']}/map.pgm").content,
     ).json()
     r = client.post(f"/api/maps/{copy['id']}/activate")
