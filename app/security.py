@@ -21,6 +21,7 @@ import threading
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from enum import IntEnum
 from http.cookies import SimpleCookie
 from typing import Any
@@ -291,7 +292,8 @@ class LeaseGuard:
         h = d["holder"]
         if h is not None:
             raw = self._raw.get(h["client_id"], "")
-            h = {"name": h["name"], "since": h["since"], "connected": self.connected(raw)}
+            since = datetime.fromtimestamp(h["since"], UTC).isoformat().replace("+00:00", "Z")
+            h = {"name": h["name"], "since": since, "connected": self.connected(raw)}
         return {"holder": h}
 
 

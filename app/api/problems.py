@@ -39,8 +39,8 @@ class Problem(BaseModel):
 
 class FieldError(BaseModel):
     field: str = Field(
-        description="dotted path in the request: `x`, `goals.1.theta`, `query.limit`; "
-        "`body` for the body as a whole (not JSON, wrong type)"
+        description="dotted path in the body (`x`, `goals.1.theta`) or the query / path parameter's "
+        "name (`limit`); `body` for the body as a whole (not JSON, wrong type)"
     )
     message: str
 
@@ -106,19 +106,20 @@ class ProblemError(Exception):
 
 
 def field_errors(exc: RequestValidationError) -> list[dict[str, str]]:
-    """``{field, message}`` per error. The field is the path inside the body (``goals.1.x``) or
-    ``query.<name>`` / ``path.<name>``; a body that is not JSON is ``body`` (pydantic reports the
-    byte offset of the syntax error as if it were a field: it goes into the message instead)."""
+    """``{field, message}`` per error. The field is the path inside the body (``goals.1.x``), or the
+    query / path parameter's name; a body that is not JSON is ``body`` (pydantic reports the byte
+    offset of the syntax error as if it were a field: it goes into the message instead)."""
     out = []
     for e in exc.errors():
-        loc = [str(p) for p in e.get("loc", ())]
-        where, rest = (loc[0], loc[1:]) if loc else ("body", [])
+        rest = [str(p) for p in e.get("loc", ())][1:]
         msg = str(e.get("msg", "invalid"))
+        given = e.get("input")
         if e.get("type") == "json_invalid":
             pos = rest[0] if rest else "?"
             rest, msg = [], f"not valid JSON (at character {pos}): {e.get('ctx', {}).get('error', msg)}"
-        field = ".".join(rest) if where == "body" else ".".join([where, *rest])
-        out.append({"field": field or "body", "message": msg})
+        elif isinstance(given, str | int | float) and not isinstance(given, bool) and len(repr(given)) <= 80:
+            msg = f"{msg}, got {given!r}"  # say what was wrong: "Input should be 'idle'..., got 'flying'"
+        out.append({"field": ".".join(rest) or "body", "message": msg})
     return out
 
 

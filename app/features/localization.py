@@ -150,6 +150,7 @@ class Localization:
         self._applied = threading.Condition()
         self._requests_done = 0  # requests applied by the loop (initial pose / global / map), for waiters
         self._requests_made = 0
+        self._awaiting: int | None = None  # requests applied, waiting for the filter's next update
         self.map_mismatch = False  # see _check_map_match
         self._mismatch_updates = 0
         self.resets = 0  # times the estimate was reset (initial pose, global): costmaps clear their marks
@@ -259,15 +260,16 @@ class Localization:
             made = self._requests_made
         for kind, arg in pending:
             self._apply(kind, arg, now)
-        try:
-            self._step(session, frame, now)
-        finally:
-            # a request counts as applied once the filter ran on a scan after it (or could not: no
-            # filter, no scan), so a waiter reads the estimate it led to
-            if pending:
-                with self._applied:
-                    self._requests_done = made
-                    self._applied.notify_all()
+        if pending:
+            self._awaiting = made
+        updates = self.updates
+        self._step(session, frame, now)
+        # a request counts as applied once the filter weighed a scan after it (or cannot: no filter),
+        # so a waiter reads the estimate it led to, not the one before
+        if self._awaiting is not None and (self.updates > updates or self.amcl is None):
+            with self._applied:
+                self._requests_done, self._awaiting = self._awaiting, None
+                self._applied.notify_all()
 
     def _step(self, session: Session, frame: SensorFrame, now: float) -> None:
         if self.options.source == "truth":

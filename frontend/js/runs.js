@@ -63,7 +63,7 @@ async function loadList() {
 
 async function loadMaps() {
   try {
-    const maps = await api("GET", "/api/maps");
+    const maps = (await api("GET", "/api/maps?limit=500")).items;
     const sel = $("#filters select[name=map_id]");
     for (const m of maps) {
       const o = document.createElement("option");
