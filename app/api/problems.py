@@ -86,7 +86,6 @@ def problem_responses(**described: str) -> dict[int | str, dict[str, Any]]:
     """OpenAPI ``responses`` for error statuses given as ``s404="no such mission"``."""
     return {
         int(code.removeprefix("s")): {
-            "model": Problem,
             "description": text,
             "content": {PROBLEM_MEDIA_TYPE: {"schema": {"$ref": "#/components/schemas/Problem"}}},
         }
@@ -153,10 +152,9 @@ def install(app: FastAPI) -> None:
 
 
 def _document(app: FastAPI) -> None:
-    """FastAPI documents its automatic 422 as ``HTTPValidationError`` (application/json); point every
-    such answer at ``ValidationProblem`` (application/problem+json), which is what ``install`` sends,
-    and make every other error answer declared without a body a ``Problem`` (schemathesis checks
-    each response against this)."""
+    """Every error answer is documented as what ``install`` sends: ``application/problem+json``, a
+    ``ValidationProblem`` for 422 (FastAPI's automatic ``HTTPValidationError`` is replaced), else a
+    ``Problem`` (schemathesis checks each response against this)."""
     inner = app.openapi
 
     def openapi() -> dict:
@@ -176,11 +174,9 @@ def _document(app: FastAPI) -> None:
                     if not str(code).startswith(("4", "5")):
                         continue
                     ref = "ValidationProblem" if str(code) == "422" else "Problem"
-                    content = resp.get("content") or {}
-                    if str(code) == "422" or not content or set(content) == {"application/json"}:
-                        resp["content"] = {
-                            PROBLEM_MEDIA_TYPE: {"schema": {"$ref": f"#/components/schemas/{ref}"}}
-                        }
+                    resp["content"] = {
+                        PROBLEM_MEDIA_TYPE: {"schema": {"$ref": f"#/components/schemas/{ref}"}}
+                    }
         app.openapi_schema = schema
         return schema
 

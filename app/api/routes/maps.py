@@ -101,6 +101,7 @@ def get_map(map_id: int, rt: RuntimeDep) -> MapOut:
 
 @router.get(
     "/api/maps/{map_id}/thumbnail.png",
+    response_class=Response,
     summary="A small PNG preview",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
@@ -133,6 +134,7 @@ def _attachment(filename: str) -> dict[str, str]:
 
 @router.get(
     "/api/maps/{map_id}/map.yaml",
+    response_class=Response,
     summary="The map's YAML as map_saver writes it (image: map.pgm)",
     responses={**NOT_FOUND, 200: {"content": {"application/x-yaml": {}}}},
 )
@@ -145,6 +147,7 @@ def export_yaml(map_id: int, rt: RuntimeDep) -> Response:
 
 @router.get(
     "/api/maps/{map_id}/map.pgm",
+    response_class=Response,
     summary="The map's P5 PGM as map_saver writes it (254 free, 0 occupied, 205 unknown)",
     responses={**NOT_FOUND, 200: {"content": {"image/x-portable-graymap": {}}}},
 )
@@ -157,6 +160,7 @@ def export_pgm(map_id: int, rt: RuntimeDep) -> Response:
 
 @router.get(
     "/api/maps/{map_id}/image.png",
+    response_class=Response,
     summary="The whole map as a PNG, one pixel per cell (map_saver's grey levels, top row = max y)",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )

@@ -245,6 +245,7 @@ def trajectory(
 
 @router.get(
     "/api/runs/{run_id}/map.png",
+    response_class=Response,
     summary="The map as the run last saw it, full size (map_saver grey levels, top row first)",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
@@ -299,6 +300,7 @@ def state_at(
 
 @router.get(
     "/api/runs/{run_id}/export.mcap",
+    response_class=Response,
     summary="Download as MCAP with ROS 2 messages (Foxglove, ros2 bag)",
     description=EXPORT_NOTE,
     responses={**NOT_FOUND, 200: {"content": {"application/octet-stream": {}}, "headers": PARTIAL}},
@@ -314,7 +316,22 @@ def export_mcap(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
     "/api/runs/{run_id}/export.json",
     summary="Download everything as JSON (samples as columns; scans with ?scans=true)",
     description=EXPORT_NOTE,
-    responses={**NOT_FOUND, 200: {"headers": PARTIAL}},
+    responses={
+        **NOT_FOUND,
+        200: {
+            "headers": PARTIAL,
+            "content": {
+                "application/json": {
+                    "schema": {
+                        "type": "object",
+                        "required": ["run"],
+                        "description": "the run (`run`: as `GET /api/runs/{id}`), its events, goals, "
+                        "plans, maps and samples as columns; `partial` while it records",
+                    }
+                }
+            },
+        },
+    },
 )
 def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
     from app.export.tabular import run_json
@@ -325,6 +342,7 @@ def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = Fals
 
 @router.get(
     "/api/runs/{run_id}/export.csv",
+    response_class=Response,
     summary="Download the trajectory samples as CSV",
     description=EXPORT_NOTE,
     responses={**NOT_FOUND, 200: {"content": {"text/csv": {}}, "headers": PARTIAL}},

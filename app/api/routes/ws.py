@@ -12,7 +12,7 @@ from dataclasses import replace
 from typing import Literal
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
-from fastapi.responses import JSONResponse
+from fastapi.responses import JSONResponse, Response
 from pydantic import Field
 from starlette.websockets import WebSocketState
 
@@ -298,6 +298,7 @@ def ws_schema_index() -> SchemaIndex:
 
 @router.get(
     "/api/schemas/ws/{name}.json",
+    response_class=Response,
     tags=["schemas"],
     summary="One websocket message kind as JSON Schema (2020-12)",
     responses={
