@@ -12,6 +12,7 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import Annotated, Any, Generic, Literal, TypeVar
 
+from fastapi import Path as PathParam
 from pydantic import AfterValidator, BaseModel, BeforeValidator, ConfigDict, Field
 
 from app.api.problems import problem_responses
@@ -31,6 +32,17 @@ def _from_epoch(value: Any) -> Any:
 
 Timestamp = Annotated[datetime, BeforeValidator(_from_epoch), AfterValidator(as_utc)]
 """A wall-clock instant, serialized ISO 8601 UTC with ``Z`` (``2026-11-26T06:45:41.123456Z``)."""
+
+
+Pair = Annotated[list[float], Field(min_length=2, max_length=2)]
+"""Two numbers (x, y or width, height): a list, as JSON has no tuple (and OpenAPI tools disagree on
+how to write one)."""
+Triple = Annotated[list[float], Field(min_length=3, max_length=3)]
+"""Three numbers (x, y, theta or vx, vy, wz)."""
+
+
+DbId = Annotated[int, PathParam(ge=1, le=2**63 - 1, description="a database id")]
+"""A path id of a stored row (map, run): out of range is a 422, never an overflow in the database."""
 
 
 class Out(BaseModel):
@@ -175,7 +187,7 @@ class NavigationOut(Out):
     outcome: NavOutcome | None = Field(description="how the last request ended")
     recoveries: int
     costmap_view: Literal["global", "local"]
-    path: list[tuple[float, float]] | None = Field(
+    path: list[Pair] | None = Field(
         None, description="the planned path (map frame, m); REST only, not in telemetry"
     )
 

@@ -11,7 +11,7 @@ from app.api.deps import RuntimeDep, StrictModel
 from app.api.problems import ProblemError
 from app.api.routes.maps import MapOut, active_map_id, map_out
 from app.api.routes.robot import refused
-from app.api.schemas import ERRORS, Out
+from app.api.schemas import ERRORS, Out, Pair
 from app.features.mapping import Mapping, NoMapError
 from app.modes import TransitionRefused
 
@@ -23,7 +23,7 @@ class MappingOut(Out):
     has_map: bool
     nodes: int = Field(description="pose-graph nodes")
     loop_closures: int
-    map_size_m: tuple[float, float] | None = Field(description="width, height in m")
+    map_size_m: Pair | None = Field(description="width, height in m")
     last_optimization_ms: float | None = Field(description="ms")
     front_end_ms: float | None = Field(description="ms per scan")
     scans_dropped: int

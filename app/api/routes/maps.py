@@ -15,7 +15,7 @@ from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel
 from app.api.problems import ProblemError
-from app.api.schemas import ERRORS, Out, Page, Timestamp
+from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp, Triple
 from app.features.localization import map_fit
 from app.features.recording import current_map_id
 from app.map_store import MapInfo
@@ -35,8 +35,8 @@ class MapOut(Out):
     resolution: float = Field(description="m per cell")
     width: int = Field(description="cells")
     height: int = Field(description="cells")
-    size_m: tuple[float, float] = Field(description="width, height in m")
-    origin: tuple[float, float, float] = Field(description="x (m), y (m), yaw (rad) of the lower-left cell")
+    size_m: Pair = Field(description="width, height in m")
+    origin: Triple = Field(description="x (m), y (m), yaw (rad) of the lower-left cell")
     source: str = Field(description="`stock` (a simulator world), `slam` (built here) or `import`")
     is_stock: bool
     robot_id: int | None
@@ -92,7 +92,7 @@ def list_maps(
 
 
 @router.get("/api/maps/{map_id}", response_model=MapOut, summary="One map's metadata", responses=NOT_FOUND)
-def get_map(map_id: int, rt: RuntimeDep) -> MapOut:
+def get_map(map_id: DbId, rt: RuntimeDep) -> MapOut:
     info = rt.maps.info(map_id)
     if info is None:
         raise HTTPException(404, f"no map with id {map_id}")
@@ -105,7 +105,7 @@ def get_map(map_id: int, rt: RuntimeDep) -> MapOut:
     summary="A small PNG preview",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
-def thumbnail(map_id: int, rt: RuntimeDep) -> Response:
+def thumbnail(map_id: DbId, rt: RuntimeDep) -> Response:
     png = rt.maps.thumbnail(map_id)
     if png is None:
         raise HTTPException(404, f"no map with id {map_id}")
@@ -138,7 +138,7 @@ def _attachment(filename: str) -> dict[str, str]:
     summary="The map's YAML as map_saver writes it (image: map.pgm)",
     responses={**NOT_FOUND, 200: {"content": {"application/x-yaml": {}}}},
 )
-def export_yaml(map_id: int, rt: RuntimeDep) -> Response:
+def export_yaml(map_id: DbId, rt: RuntimeDep) -> Response:
     from maps.mapio import encode_yaml
 
     body = encode_yaml(_grid(rt, map_id), PGM_NAME)
@@ -151,7 +151,7 @@ def export_yaml(map_id: int, rt: RuntimeDep) -> Response:
     summary="The map's P5 PGM as map_saver writes it (254 free, 0 occupied, 205 unknown)",
     responses={**NOT_FOUND, 200: {"content": {"image/x-portable-graymap": {}}}},
 )
-def export_pgm(map_id: int, rt: RuntimeDep) -> Response:
+def export_pgm(map_id: DbId, rt: RuntimeDep) -> Response:
     from maps.mapio import encode_pgm
 
     body = encode_pgm(_grid(rt, map_id))
@@ -164,7 +164,7 @@ def export_pgm(map_id: int, rt: RuntimeDep) -> Response:
     summary="The whole map as a PNG, one pixel per cell (map_saver's grey levels, top row = max y)",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
-def full_image(map_id: int, rt: RuntimeDep) -> Response:
+def full_image(map_id: DbId, rt: RuntimeDep) -> Response:
     from maps.png import encode_png
     from maps.render import grid_to_grey
 
@@ -278,7 +278,7 @@ def _user_map(rt: Any, map_id: int, what: str):
     response_model=MapOut,
     responses={**NOT_FOUND, **ERRORS(s409="a stock map, or another map has this name (`existing_id`)")},
 )
-def rename_map(map_id: int, body: RenameIn, rt: RuntimeDep) -> MapOut:
+def rename_map(map_id: DbId, body: RenameIn, rt: RuntimeDep) -> MapOut:
     _user_map(rt, map_id, "renamed")
     refuse_taken_name(rt, body.name.strip(), own_id=map_id)
     info = rt.maps.rename(map_id, body.name.strip())
@@ -296,7 +296,7 @@ def rename_map(map_id: int, body: RenameIn, rt: RuntimeDep) -> MapOut:
         **ERRORS(s409="a stock map, or the active map (`active_map_id`): activate another map first"),
     },
 )
-def delete_map(map_id: int, rt: RuntimeDep) -> Response:
+def delete_map(map_id: DbId, rt: RuntimeDep) -> Response:
     _user_map(rt, map_id, "deleted")
     if active_map_id(rt) == map_id:
         raise ProblemError(
@@ -317,7 +317,7 @@ def delete_map(map_id: int, rt: RuntimeDep) -> Response:
     response_model=ActivatedOut,
     responses={**NOT_FOUND, **ERRORS(s409="not while MAPPING; in simulation, not a map of another world")},
 )
-def activate_map(map_id: int, rt: RuntimeDep) -> ActivatedOut:
+def activate_map(map_id: DbId, rt: RuntimeDep) -> ActivatedOut:
     session = rt.session
     if session.modes.mode == Mode.MAPPING:
         raise ProblemError(

@@ -10,7 +10,7 @@ from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel
 from app.api.problems import ProblemError
-from app.api.schemas import ERRORS, ControlState, Health, Out, Pose, Twist
+from app.api.schemas import ERRORS, ControlState, Health, Out, Pair, Pose, Twist
 from app.modes import USER_REQUESTABLE, Mode, TransitionRefused
 from app.security import LeaseGuard
 from app.telemetry import pose_dict, twist_dict
@@ -60,7 +60,7 @@ class Profile(Out):
 
     name: str
     kinematics: str = Field(description="`diff` or `omni`")
-    footprint: list[tuple[float, float]] = Field(description="polygon in base_link, m")
+    footprint: list[Pair] = Field(description="polygon in base_link, m")
     limits: Limits
 
 

@@ -12,7 +12,7 @@ from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel, get_runtime
-from app.api.schemas import ERRORS, OpenOut, Out, Page, Timestamp
+from app.api.schemas import ERRORS, DbId, OpenOut, Out, Page, Pair, Timestamp, Triple
 from app.export.data import RunData, load_run
 from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, utc_aware
 from app.runtime import Runtime
@@ -75,7 +75,7 @@ class RunMapGeometry(Out):
     resolution: float = Field(description="m per cell")
     width: int
     height: int
-    origin: tuple[float, float, float] = Field(description="x (m), y (m), yaw (rad)")
+    origin: Triple = Field(description="x (m), y (m), yaw (rad)")
     image_url: str
 
 
@@ -89,19 +89,19 @@ class TrajectoryOut(Out):
 
 class ScanAt(Out):
     t: float = Field(description="s since the run started")
-    points: list[tuple[float, float]] = Field(description="map frame, m")
+    points: list[Pair] = Field(description="map frame, m")
 
 
 class PlanAt(Out):
     t: float = Field(description="s since the run started")
-    poses: list[tuple[float, float]] = Field(description="map frame, m")
+    poses: list[Pair] = Field(description="map frame, m")
 
 
 class RunStateOut(Out):
     t: float = Field(description="s since the run started")
-    pose: tuple[float, float, float] = Field(description="x (m), y (m), theta (rad), map frame")
-    velocity: tuple[float, float, float] = Field(description="vx, vy (m/s), wz (rad/s)")
-    command: tuple[float, float, float] = Field(description="vx, vy (m/s), wz (rad/s)")
+    pose: Triple = Field(description="x (m), y (m), theta (rad), map frame")
+    velocity: Triple = Field(description="vx, vy (m/s), wz (rad/s)")
+    command: Triple = Field(description="vx, vy (m/s), wz (rad/s)")
     mode: str
     behavior: str | None
     scan: ScanAt | None = None
@@ -206,7 +206,7 @@ def list_runs(
     summary="One run: summary metrics, events, goals",
     responses=NOT_FOUND,
 )
-def get_run(run_id: int, store: StoreDep) -> dict:
+def get_run(run_id: DbId, store: StoreDep) -> dict:
     return run_out(_found(store.detail, run_id))
 
 
@@ -217,7 +217,7 @@ def get_run(run_id: int, store: StoreDep) -> dict:
     responses=NOT_FOUND,
 )
 def trajectory(
-    run_id: int,
+    run_id: DbId,
     store: StoreDep,
     t0: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     t1: Annotated[float | None, Query(allow_inf_nan=False)] = None,
@@ -249,7 +249,7 @@ def trajectory(
     summary="The map as the run last saw it, full size (map_saver grey levels, top row first)",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
-def run_map_png(run_id: int, store: StoreDep) -> Response:
+def run_map_png(run_id: DbId, store: StoreDep) -> Response:
     from maps.png import encode_png
     from maps.render import grid_to_grey
 
@@ -305,7 +305,7 @@ def state_at(
     description=EXPORT_NOTE,
     responses={**NOT_FOUND, 200: {"content": {"application/octet-stream": {}}, "headers": PARTIAL}},
 )
-def export_mcap(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
+def export_mcap(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
     from app.export.mcap import mcap_bytes
 
     data = _load(store, run_id, rt)
@@ -333,7 +333,7 @@ def export_mcap(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
         },
     },
 )
-def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
+def export_json(run_id: DbId, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
     from app.export.tabular import run_json
 
     data = _load(store, run_id, rt)
@@ -347,7 +347,7 @@ def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = Fals
     description=EXPORT_NOTE,
     responses={**NOT_FOUND, 200: {"content": {"text/csv": {}}, "headers": PARTIAL}},
 )
-def export_csv(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
+def export_csv(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
     from app.export.tabular import samples_csv
 
     data = _load(store, run_id, rt)
@@ -355,7 +355,7 @@ def export_csv(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
 
 
 @router.delete("/api/runs/{run_id}", status_code=204, responses={**NOT_FOUND, **RECORDING})
-def delete_run(run_id: int, store: StoreDep) -> Response:
+def delete_run(run_id: DbId, store: StoreDep) -> Response:
     run = _found(store.run, run_id)
     if run["outcome"] == "recording":
         raise HTTPException(409, f"run {run_id} is still recording")
@@ -389,7 +389,7 @@ class ReplayCommand(StrictModel):
     """Replay control: load a run, then play / pause / seek (t, s) / speed (factor)."""
 
     action: Literal["load", "play", "pause", "seek", "speed"]
-    run_id: int | None = None
+    run_id: int | None = Field(None, ge=1, le=2**63 - 1)
     t: float | None = None
     speed: float | None = None
 
