@@ -84,7 +84,7 @@ def test_maps_are_a_page_saying_which_is_active(client) -> None:
 
 def test_write_calls_answer_the_new_state(client) -> None:
     r = client.post("/api/navigation/cancel")  # nothing running: the state says so
-    assert r.status_code == 200 and r.json()["cancelled"] is False and r.json()["active"] is False
+    assert r.status_code == 200 and r.json()["canceled"] is False and r.json()["active"] is False
     robot = client.post("/api/robot/estop").json()
     assert robot["mode"] == "estop" and robot["estop"] is True
     robot = client.post("/api/robot/reset").json()

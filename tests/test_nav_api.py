@@ -106,7 +106,7 @@ def test_cancel_through_api(server: EmbeddedServer, api: httpx.Client) -> None:
     wait_for(api, lambda s: s["state"] == "following", 10.0)
     assert len(api.get("/api/navigation").json()["goals"]) == 2
     r = api.post("/api/navigation/cancel")
-    assert r.status_code == 200 and r.json()["cancelled"] is True
+    assert r.status_code == 200 and r.json()["canceled"] is True
     state = wait_for(api, lambda s: s["outcome"] is not None and not s["active"], 5.0)
     assert state["outcome"]["kind"] == "canceled"
     assert api.get("/api/robot").json()["mode"] == "idle"

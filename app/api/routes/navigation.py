@@ -50,7 +50,7 @@ class GoalsOut(NavigationOut):
 
 
 class CancelOut(NavigationOut):
-    cancelled: bool = Field(description="a request was running and is now stopping")
+    canceled: bool = Field(description="a request was running and is now stopping")
     mission_id: str | None
 
 
@@ -128,7 +128,7 @@ def cancel(nav: NavigationDep, missions: MissionsDep, actor: ActorDep) -> Cancel
         except MissionEnded:  # it ended between the look-up and the cancel
             was_running = False
     return CancelOut.model_validate(
-        {**navigation_state(nav), "cancelled": was_running, "mission_id": None if m is None else m.id}
+        {**navigation_state(nav), "canceled": was_running, "mission_id": None if m is None else m.id}
     )
 
 
