@@ -343,26 +343,35 @@ def activate_map(map_id: DbId, rt: RuntimeDep) -> ActivatedOut:
     return ActivatedOut(**map_out(info, map_id).model_dump(), active_map_id=map_id, match_score=score)
 
 
+SIM_MATCH_RATIO = 0.8
+"""In simulation a map is the world's when the lidar's scan fits it at least this fraction as well as
+it fits the world's own map (the same measure, ``Amcl.quality``): a copy of the world's map scores 1,
+a map of another world far less (docs/api.md has the measured figures)."""
+
+
 def _refuse_other_world(rt: Any, loc: Any, grid: OccupancyGrid, map_id: int) -> float | None:
-    """In simulation, 409 for a map the lidar does not see: the latest scan must fit it (score at
-    least ``mismatch_quality``) at the robot's true pose (a map in the world's frame) or at its
-    current estimate (a map in the current map frame, e.g. the one mapping just built). Returns the
-    score (None on a real robot, or without a scan)."""
+    """In simulation, 409 for a map the lidar does not see. The latest scan's fit to the map, at the
+    robot's true pose (a map in the world's frame) or at its current estimate (a map in the current
+    map frame, e.g. the one mapping just built), is compared with its fit to the world's own map at the
+    true pose. Returns the map's score (None on a real robot, or without a scan)."""
     truth = getattr(rt.session.driver, "truth_pose", None)
-    if loc is None or truth is None or not rt.world_name:
+    world = rt.maps.find(rt.world_name, stock=True) if rt.world_name else None
+    world_grid = None if world is None else rt.maps.grid(world.id)
+    if loc is None or truth is None or world_grid is None:
         return None
     score = map_fit(loc, grid, [truth, rt.session.pose])
-    if score is None:
+    reference = map_fit(loc, world_grid, [truth])
+    if score is None or not reference:
         return None
-    threshold = loc.options.mismatch_quality
-    if score < threshold:
+    if score < SIM_MATCH_RATIO * reference:
         raise ProblemError(
             409,
             f"map {map_id} does not match what the lidar sees in the simulated world {rt.world_name!r} "
-            f"(scan fit {score:.2f} < {threshold:g}): activate this world's map, or serve the world "
-            "this map was made of",
+            f"(scan fit {score:.2f}, the world's own map {reference:.2f}; at least {SIM_MATCH_RATIO:g} x "
+            "that is needed): activate this world's map, or serve the world this map was made of",
             kind="map-mismatch",
             match_score=round(score, 4),
+            world_match_score=round(reference, 4),
             world=rt.world_name,
         )
     return round(score, 4)
