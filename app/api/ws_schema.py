@@ -77,6 +77,9 @@ class TelemetryMessage(Out):
     navigation: NavigationOut | None = None
     localization: LocalizationMsg | None = None
     mapping: MappingOut | None = None
+    exploration: OpenOut | None = Field(
+        None, description="frontier exploration, when that feature runs (`GET /api/exploration`'s shape)"
+    )
     contact: ContactMsg | None = None
     scan: ScanMsg | None = None
     control: ControlState
