@@ -38,6 +38,8 @@ from urllib.parse import urlsplit
 
 from starlette.exceptions import HTTPException
 
+from app.api.problems import PROBLEM_MEDIA_TYPE, problem_body
+
 Scope = dict[str, Any]
 Message = dict[str, Any]
 Receive = Callable[[], Awaitable[Message]]
@@ -260,12 +262,11 @@ class HardeningMiddleware:
 
 
 async def _reject(send: Send, status: int, detail: str, errors: list[dict] | None = None) -> None:
-    payload: dict[str, Any] = {"detail": detail}
-    if errors is not None:
-        payload["errors"] = errors  # the app's 422 shape (app.main: detail + field errors)
-    body = json.dumps(payload).encode()
+    extra: dict[str, Any] = {} if errors is None else {"errors": errors}  # ValidationProblem's shape
+    kind = {413: "too-large", 422: "invalid-request"}.get(status)
+    body = json.dumps(problem_body(status, detail, kind=kind, **extra)).encode()
     headers = [
-        (b"content-type", b"application/json"),
+        (b"content-type", PROBLEM_MEDIA_TYPE.encode()),
         (b"content-length", str(len(body)).encode()),
         (b"connection", b"close"),
         *COMMON_HEADERS,

@@ -10,9 +10,8 @@ import pkgutil
 from pathlib import Path
 from typing import Any
 
-from fastapi import FastAPI, Request
-from fastapi.exceptions import RequestValidationError
-from fastapi.responses import FileResponse, JSONResponse
+from fastapi import FastAPI
+from fastapi.responses import FileResponse
 from fastapi.staticfiles import StaticFiles
 
 import app.api.routes as routes_pkg
@@ -53,39 +52,6 @@ async def _sweep_leases(guard, period: float = 1.0) -> None:
             log.exception("lease sweep failed")
 
 
-def _document_validation_errors(app: FastAPI) -> None:
-    """Make the OpenAPI schema say what our 422 handler really returns (``{"detail": str, "errors":
-    [{"field", "message"}]}``) instead of FastAPI's default list-shaped ``detail``; schemathesis checks
-    every response against the schema (docs/reliability.md)."""
-    default_openapi = app.openapi
-
-    def openapi() -> dict:
-        if app.openapi_schema is None:
-            schema = default_openapi()
-            schemas = schema.get("components", {}).get("schemas", {})
-            if "HTTPValidationError" in schemas:
-                schemas["HTTPValidationError"] = {
-                    "title": "HTTPValidationError",
-                    "type": "object",
-                    "required": ["detail"],
-                    "properties": {
-                        "detail": {"type": "string", "title": "Detail", "description": "every error, joined"},
-                        "errors": {
-                            "type": "array",
-                            "items": {
-                                "type": "object",
-                                "required": ["field", "message"],
-                                "properties": {"field": {"type": "string"}, "message": {"type": "string"}},
-                            },
-                        },
-                    },
-                }
-            app.openapi_schema = schema
-        return app.openapi_schema
-
-    app.openapi = openapi  # type: ignore[method-assign]
-
-
 def create_app(runtime: Runtime) -> FastAPI:
     from app.auth import UserStore
     from app.hardening import HardeningMiddleware
@@ -123,20 +89,10 @@ def create_app(runtime: Runtime) -> FastAPI:
     # Outermost (added last): size limits, security headers and websocket Origin checks (app/hardening.py).
     app.add_middleware(HardeningMiddleware, max_upload_bytes=settings.max_upload_bytes)
 
-    @app.exception_handler(RequestValidationError)
-    async def _validation(_req: Request, exc: RequestValidationError) -> JSONResponse:
-        errors = [
-            {"field": ".".join(str(p) for p in e["loc"][1:]) or "body", "message": e["msg"]}
-            for e in exc.errors()
-        ]
-        summary = "; ".join(f"{e['field']}: {e['message']}" for e in errors)
-        return JSONResponse(status_code=422, content={"detail": summary, "errors": errors})
-
-    install_problems(app)  # routes may raise ProblemError (RFC 9457 bodies)
+    install_problems(app)  # every error is an RFC 9457 problem (app/api/problems.py)
     for module in _route_modules():
         app.include_router(module.router)
 
-    _document_validation_errors(app)
     from app.ratelimit import document_rate_limits
 
     document_rate_limits(app)  # 429 on the control endpoints (limited in app.security)

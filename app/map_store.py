@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 from sqlalchemy.engine import Engine
 from sqlalchemy.exc import IntegrityError
-from sqlmodel import Session, select
+from sqlmodel import Session, col, select
 
 from app.models import MapRecord, utcnow
 from maps.render import thumbnail_png
@@ -131,6 +131,18 @@ class MapStore:
                 q = q.where(MapRecord.is_stock == stock)
             rec = s.exec(q.order_by(MapRecord.id)).first()
             return _info(rec) if rec else None
+
+    def free_name(self, name: str) -> str:
+        """``name`` if no map has it, else the first free ``name (2)``, ``name (3)``...: importing the
+        same files twice makes two maps that can be told apart (the answer says the name it got)."""
+        with Session(self.engine) as s:
+            taken = set(s.exec(select(MapRecord.name).where(col(MapRecord.name).startswith(name))).all())
+        n = 1
+        candidate = name
+        while candidate in taken:
+            n += 1
+            candidate = f"{name} ({n})"
+        return candidate
 
     def grid(self, map_id: int) -> OccupancyGrid | None:
         with Session(self.engine) as s:

@@ -95,9 +95,7 @@ RATE_LIMITED_RESPONSE = {
     "description": "too many control requests from this client: wait ``Retry-After`` seconds",
     "headers": {"Retry-After": {"schema": {"type": "integer"}, "description": "seconds to wait"}},
     "content": {
-        "application/json": {
-            "schema": {"type": "object", "required": ["detail"], "properties": {"detail": {"type": "string"}}}
-        }
+        "application/problem+json": {"schema": {"$ref": "#/components/schemas/Problem"}},
     },
 }
 

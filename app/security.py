@@ -21,11 +21,13 @@ import threading
 import time
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass, field
+from datetime import UTC, datetime
 from enum import IntEnum
 from http.cookies import SimpleCookie
 from typing import Any
 from urllib.parse import quote
 
+from app.api.problems import PROBLEM_MEDIA_TYPE, problem_body
 from app.auth import CLIENT_COOKIE, SESSION_COOKIE, LoginThrottle, Principal, Role, UserStore, token_digest
 from app.control import ControlLease
 from app.modes import Mode, TransitionRefused
@@ -290,7 +292,8 @@ class LeaseGuard:
         h = d["holder"]
         if h is not None:
             raw = self._raw.get(h["client_id"], "")
-            h = {"name": h["name"], "since": h["since"], "connected": self.connected(raw)}
+            since = datetime.fromtimestamp(h["since"], UTC).isoformat().replace("+00:00", "Z")
+            h = {"name": h["name"], "since": since, "connected": self.connected(raw)}
         return {"holder": h}
 
 
@@ -463,12 +466,22 @@ class SecurityMiddleware:
 
 
 async def _respond(send: Send, status: int, body: dict | None, headers: list) -> None:
+    """Answer from the middleware; a refusal is a problem-details body like every route's error."""
     import json
 
-    data = b"" if body is None else json.dumps(body).encode()
-    hdrs = [(b"content-type", b"application/json"), (b"content-length", str(len(data)).encode()), *headers]
+    if body is None:
+        data, ctype = b"", b"application/json"
+    else:
+        body = dict(body)
+        detail = str(body.pop("detail", ""))
+        data = json.dumps(problem_body(status, detail, kind=_REFUSAL_KIND.get(status), **body)).encode()
+        ctype = PROBLEM_MEDIA_TYPE.encode()
+    hdrs = [(b"content-type", ctype), (b"content-length", str(len(data)).encode()), *headers]
     await send({"type": "http.response.start", "status": status, "headers": hdrs})
     await send({"type": "http.response.body", "body": data})
+
+
+_REFUSAL_KIND = {401: "sign-in-required", 403: "forbidden", 409: "control-held", 429: "rate-limited"}
 
 
 # Messages a viewer's 3D view must not send upstream to viser: clicks and drags (they set goals and

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import math
+from datetime import UTC, datetime
 from typing import Any
 
 import numpy as np
 
+from app.api.schemas import public_navigation
 from app.bus import Snapshot
 from nav.types import Pose2D, Twist2D
 
@@ -33,7 +35,7 @@ def downsample_scan(snap: Snapshot, max_beams: int = 180) -> dict[str, Any] | No
     valid = np.isfinite(r) & (r >= scan.range_min) & (r <= scan.range_max)
     rounded = np.round(r, 2)
     return {
-        "stamp": round(scan.stamp, 3),
+        "stamp_monotonic_s": round(scan.stamp, 3),
         "angle_min": round(scan.angle_min, 5),
         "angle_increment": round(scan.angle_increment * step, 6),
         "range_max": scan.range_max,
@@ -45,7 +47,8 @@ def snapshot_dict(
     snap: Snapshot, profile_name: str, *, include_scan: bool = True, allowed_modes: list[str] | None = None
 ) -> dict[str, Any]:
     out: dict[str, Any] = {
-        "stamp": round(snap.stamp, 3),
+        "time": datetime.now(UTC).isoformat().replace("+00:00", "Z"),
+        "stamp_monotonic_s": round(snap.stamp, 3),
         "seq": snap.seq,
         "mode": snap.mode,
         "allowed_modes": allowed_modes or [],
@@ -57,13 +60,15 @@ def snapshot_dict(
         "estop": snap.estop,
         "fault": snap.fault,
         "behavior": snap.behavior,
-        "profile": profile_name,
+        "profile_name": profile_name,
         "health": snap.health,
         "goal": pose_dict(snap.goal) if snap.goal is not None else None,
     }
     for key in ("navigation", "localization", "mapping", "contact"):
         if key in snap.extras:
             out[key] = snap.extras[key]
+    if "navigation" in out:
+        out["navigation"] = public_navigation(out["navigation"])
     if include_scan:
         out["scan"] = downsample_scan(snap)
     return out

@@ -17,12 +17,18 @@ def test_health_and_robot(client) -> None:
 def test_mode_changes_and_refusals(client) -> None:
     r = client.post("/api/robot/mode", json={"mode": "teleop"})
     assert r.status_code == 200 and r.json()["mode"] == "teleop"
-    r = client.post("/api/robot/mode", json={"mode": "flying"})
-    assert r.status_code == 409
-    body = r.json()
-    assert body["mode"] == "teleop" and "unknown mode" in body["detail"] and "idle" in body["allowed"]
-    r = client.post("/api/robot/mode", json={"mode": "fault"})
-    assert r.status_code == 409 and "cannot be requested" in r.json()["detail"]
+    # an unknown or not requestable mode is a bad request (422, the schema's enum), not a refusal
+    for bad in ("flying", "fault"):
+        r = client.post("/api/robot/mode", json={"mode": bad})
+        assert r.status_code == 422 and r.headers["content-type"] == "application/problem+json", r.text
+        body = r.json()
+        assert body["type"].endswith("/invalid-request") and body["errors"][0]["field"] == "mode"
+        assert "'idle'" in body["errors"][0]["message"], body
+    assert client.get("/api/robot").json()["mode"] == "teleop"  # nothing changed
+    r = client.post("/api/robot/mode", json={"mode": "mapping"})
+    r = client.post("/api/robot/mode", json={"mode": "localizing"})  # MAPPING -> LOCALIZING: refused
+    assert r.status_code == 409 and r.json()["type"].endswith("/mode-refused")
+    assert r.json()["mode"] == "mapping" and "idle" in r.json()["allowed"]
 
 
 def test_estop_latches_until_reset(client) -> None:
@@ -42,13 +48,16 @@ def test_bad_bodies_are_422_with_field(client) -> None:
     r = client.post("/api/robot/mode", json={"mode": "teleop", "speed": 3})
     assert r.status_code == 422 and "speed" in r.json()["detail"]
     r = client.post("/api/robot/mode", content=b"{not json", headers={"content-type": "application/json"})
-    assert r.status_code == 422
+    assert r.status_code == 422  # reported against the body, not against a character offset
+    assert [e["field"] for e in r.json()["errors"]] == ["body"] and "not valid JSON" in r.json()["detail"]
     r = client.post("/api/robot/mode", json={})
     assert r.status_code == 422 and "mode" in r.json()["detail"]
 
 
 def test_stock_maps_registered_with_thumbnails(client) -> None:
-    maps = client.get("/api/maps").json()
+    page = client.get("/api/maps").json()
+    maps = page["items"]
+    assert page["total"] == len(maps) and page["offset"] == 0
     names = {m["name"] for m in maps}
     assert {"apartment", "office", "greenhouse"} <= names
     first = maps[0]

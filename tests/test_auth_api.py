@@ -95,7 +95,9 @@ def test_wrong_password_401_without_hint_then_429_while_locked(server: EmbeddedS
         wrong_pw = c.post("/api/auth/login", json={"username": OPERATOR[0], "password": "nope-nope"})
         no_user = c.post("/api/auth/login", json={"username": "mallory", "password": "nope-nope"})
         assert wrong_pw.status_code == no_user.status_code == 401
-        assert wrong_pw.json() == no_user.json() == {"detail": "wrong username or password"}
+        assert wrong_pw.json() == no_user.json()  # no hint which of the two was wrong
+        assert wrong_pw.json()["detail"] == "wrong username or password"
+        assert wrong_pw.headers["content-type"] == "application/problem+json"
         assert "navdeck_session" not in c.cookies
         # a failure locks the address (and the user) for a growing time: a parallel attempt is refused
         server.app.state.auth.throttle.failed(["user:olga"], now=time.monotonic() + 5.0)

@@ -65,7 +65,7 @@ def check_maps_complete(db_url: str) -> int:
 def restart_and_list(db_url: str, data_dir: Path) -> list[dict]:
     server = spawn_server(db_url, data_dir, ready_timeout=120)
     try:
-        maps = server.get_json("/api/maps")
+        maps = server.get_json("/api/maps?limit=500")["items"]
         for m in maps:
             assert server.get_json(f"/api/maps/{m['id']}")["width"] == m["width"]
         return maps

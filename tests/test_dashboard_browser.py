@@ -259,7 +259,7 @@ def test_click_goal_in_3d_view_reaches_it(page, server: EmbeddedServer) -> None:
     # the simulator's truth is in the stock map's frame: go back to the stock map, as an operator would
     # before navigating in the known apartment. (Telling AMCL a stock-frame pose on the SLAM map put the
     # robot metres away from where the map said it was, so the map's walls hemmed it in.)
-    stock = [m for m in page.request.get(server.url + "/api/maps").json() if m["is_stock"]]
+    stock = [m for m in page.request.get(server.url + "/api/maps?limit=500").json()["items"] if m["is_stock"]]
     stock_id = next(m["id"] for m in stock if m["name"] == server.runtime.world_name)
     if loc.map_id != stock_id:
         r = page.request.post(server.url + f"/api/maps/{stock_id}/activate")

@@ -87,7 +87,7 @@ def test_mapping_session_end_to_end(api: httpx.Client, server: EmbeddedServer, t
     map_id = saved["id"]
     assert saved["source"] == "slam" and saved["name"] == "living room"
     assert saved["run_id"] is not None  # the recorder's mapping run
-    listed = {m["id"]: m for m in api.get("/api/maps").json()}
+    listed = {m["id"]: m for m in api.get("/api/maps", params={"limit": 500}).json()["items"]}
     assert map_id in listed and listed[map_id]["thumbnail_url"] == f"/api/maps/{map_id}/thumbnail.png"
     thumb = api.get(listed[map_id]["thumbnail_url"])
     assert thumb.status_code == 200 and thumb.content.startswith(b"\x89PNG")

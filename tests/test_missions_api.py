@@ -194,8 +194,8 @@ def test_goal_endpoints_are_thin_wrappers_answering_the_new_state(
     m = wait_until(api, m, lambda m: m["state"] == "active")
     r = api.post("/api/navigation/cancel")
     assert r.status_code == 200
-    assert r.json()["cancelled"] is True and r.json()["mission_id"] == m["id"]
-    assert r.json()["state"] == "cancelled" and r.json()["active"] is False
+    assert r.json()["canceled"] is True and r.json()["mission_id"] == m["id"]
+    assert r.json()["state"] == "canceled" and r.json()["active"] is False
     m = wait_until(api, m, lambda m: m["state"] in TERMINAL)
     assert m["state"] == "canceled" and m["cancel"]["reason"] == "operator_cancel"
 

@@ -28,7 +28,9 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from app.modes import Mode, no_lidar_reason
-from nav.types import OccupancyGrid, Pose2D, Twist2D
+from nav.localization import sensor_models as sm
+from nav.planning.goal import nearest_free_pose as nearest_traversable
+from nav.types import Costmap, OccupancyGrid, Pose2D, Twist2D
 
 if TYPE_CHECKING:
     from app.runtime import Runtime
@@ -39,7 +41,35 @@ if TYPE_CHECKING:
 ORDER = 20
 log = logging.getLogger("navdeck.localization")
 
+APPLY_TIMEOUT_S = 5.0
+"""How long a request waits for the control loop to apply an initial pose and weigh a scan there."""
+NEAREST_FREE_RADIUS_M = 3.0
+"""How far from a refused pose the nearest free pose is looked for."""
+
 MapListener = Callable[[OccupancyGrid, "int | None"], None]
+
+
+def nearest_free_pose(loc: Localization, pose: Pose2D) -> Pose2D | None:
+    """The free cell of the active map nearest to ``pose`` (within ``NEAREST_FREE_RADIUS_M``), what a
+    refused initial pose suggests instead; None without a map or a free cell near."""
+    grid = loc.grid
+    if grid is None or not pose.is_finite():
+        return None
+    costs = np.where(grid.data >= loc.options.occupied_threshold, 254, np.where(grid.data < 0, 255, 0))
+    return nearest_traversable(Costmap(grid.geometry, costs.astype(np.uint8)), pose, NEAREST_FREE_RADIUS_M)
+
+
+def map_fit(loc: Localization, grid: OccupancyGrid, poses: list[Pose2D]) -> float | None:
+    """How well the robot's latest scan fits ``grid`` (0..1, ``Amcl.quality``'s measure) at the best of
+    ``poses`` (map frame of ``grid``); None without a scan. What activation in simulation checks: a
+    map of another world fits nowhere the robot can be."""
+    scan = loc.session.last_scan
+    if scan is None or not poses:
+        return None
+    o = loc.amcl_options
+    field = sm.LikelihoodField(grid, o.laser_likelihood_max_dist, o.sigma_hit)
+    beams = sm.select_beams(scan, o)
+    return max(sm.scan_fit(field, p, loc.laser_pose, beams) for p in poses if p.is_finite())
 
 
 class LocalizationRequestError(ValueError):
@@ -72,6 +102,9 @@ class LocalizationOptions:
     matched_std_xy: float = 0.3
     """``match_score`` counts the scan's fit only while the estimate's x and y standard deviations
     are within this (m; 0.04-0.11 while tracking in the scenario sets, up to 0.29 in the greenhouse)."""
+    mismatch_quality: float = 0.3
+    """A tight cloud (spread within ``matched_std_xy``) whose scan fits the map worse than this (0..1)
+    flags ``map_mismatch``: the active map is probably not where the robot is."""
     converged_updates: int = 3
     """...and all of it held for this many consecutive filter updates."""
     global_timeout: float = 60.0
@@ -114,6 +147,12 @@ class Localization:
         self._cov = np.zeros((3, 3))
         self._quality = 0.0
         self.updates = 0
+        self._applied = threading.Condition()
+        self._requests_done = 0  # requests applied by the loop (initial pose / global / map), for waiters
+        self._requests_made = 0
+        self._awaiting: int | None = None  # requests applied, waiting for the filter's next update
+        self.map_mismatch = False  # see _check_map_match
+        self._mismatch_updates = 0
         self.resets = 0  # times the estimate was reset (initial pose, global): costmaps clear their marks
         lid = session.profile.lidar
         self.laser_pose = Pose2D(lid.mount_x, lid.mount_y, lid.mount_yaw)
@@ -182,6 +221,7 @@ class Localization:
             cov = np.diag([o.initial_std_xy**2, o.initial_std_xy**2, o.initial_std_yaw**2])
         with self._lock:
             self._pending.append(("initial_pose", (pose, np.asarray(cov, dtype=float))))
+            self._requests_made += 1
             self.localized = True
             self.global_running = False
         self.session.add_event("initial_pose", pose=[pose.x, pose.y, pose.theta])
@@ -206,12 +246,32 @@ class Localization:
             self._good_updates = 0
         self.session.add_event("localization", status="global localization started")
 
+    def wait_applied(self, timeout: float) -> bool:
+        """Block (a request thread, never the loop) until the loop applied every request made so far
+        and ran the filter once after it; False on timeout (the state then says what is known)."""
+        with self._applied:
+            target = self._requests_made
+            return self._applied.wait_for(lambda: self._requests_done >= target, timeout)
+
     # ------------------------------------------------------------------ the stage (loop thread)
     def tick(self, session: Session, frame: SensorFrame, now: float) -> None:
         with self._lock:
             pending, self._pending = self._pending, []
+            made = self._requests_made
         for kind, arg in pending:
             self._apply(kind, arg, now)
+        if pending:
+            self._awaiting = made
+        updates = self.updates
+        self._step(session, frame, now)
+        # a request counts as applied once the filter weighed a scan after it (or cannot: no filter),
+        # so a waiter reads the estimate it led to, not the one before
+        if self._awaiting is not None and (self.updates > updates or self.amcl is None):
+            with self._applied:
+                self._requests_done, self._awaiting = self._awaiting, None
+                self._applied.notify_all()
+
+    def _step(self, session: Session, frame: SensorFrame, now: float) -> None:
         if self.options.source == "truth":
             self._track_truth(session)
             return
@@ -227,11 +287,35 @@ class Localization:
         self._particles = np.array(self.amcl.particles, dtype=np.float32)
         session.map_to_odom = self.amcl.map_to_odom()
         session.pose = session.map_to_odom.compose(session.odom_pose)
+        self._check_map_match()
         if self.global_running:
             self._check_global(now)
 
+    def _check_map_match(self) -> None:
+        """Flag a map that does not match what the lidar sees: the cloud is tight (so the estimate is
+        not a spread cloud's mean) yet the scan fits badly. Held for ``converged_updates`` updates it
+        revokes ``localized`` (navigation stops trusting the pose) and says so in an event."""
+        o = self.options
+        tight = self.spread_xy <= o.matched_std_xy
+        self._mismatch_updates = (
+            self._mismatch_updates + 1 if tight and self._quality < o.mismatch_quality else 0
+        )
+        was = self.map_mismatch
+        self.map_mismatch = self._mismatch_updates >= o.converged_updates
+        if self.map_mismatch and not was:
+            with self._lock:
+                self.localized = False
+            self.session.add_event(
+                "localization",
+                status="map mismatch",
+                reason=f"the scan does not fit the active map (score {self._quality:.2f} < "
+                f"{o.mismatch_quality:g}): not localized",
+                map_id=self.map_id,
+            )
+
     def _apply(self, kind: str, arg: Any, now: float) -> None:
         self.session.restart_trail()  # every request here moves the estimate (or its frame) at once
+        self.map_mismatch, self._mismatch_updates = False, 0
         if kind == "map":
             self.amcl = None
             self._particles = None
@@ -334,18 +418,37 @@ class Localization:
         """What ``GET /api/localization`` and the telemetry show."""
         pose = self.session.pose
         amcl = self.amcl
+        o = self.options
         return {
-            "source": self.options.source,
+            "source": o.source,
             "localized": self.localized,
+            "converged": self.converged,
             "global_running": self.global_running,
             "pose": {"x": pose.x, "y": pose.y, "theta": pose.theta},
             "covariance": np.round(self._cov, 6).tolist(),
+            "spread_m": round(self.spread_xy, 4),
             "particles": 0 if amcl is None else amcl.particle_count,
             "quality": round(float(self._quality), 4),
+            "match_score": round(float(self.match_score), 4),
+            "map_mismatch": self.map_mismatch,
             "updates": self.updates,
             "map_id": self.map_id,
             "map_version": self.map_version,
+            "criterion": {
+                "matched_std_xy": o.matched_std_xy,
+                "min_quality": o.min_quality,
+                "mismatch_quality": o.mismatch_quality,
+            },
         }
+
+    @property
+    def converged(self) -> bool:
+        """The filter has converged on the active map: at the last update the cloud was tight
+        (``spread_xy <= matched_std_xy``) and the scan fit the map there (``quality >= min_quality``).
+        The simulator's truth source always is."""
+        if self.options.source == "truth":
+            return self.grid is not None
+        return self.updates > 0 and self.match_score >= self.options.min_quality
 
     def snapshot_fields(self, session: Session) -> dict[str, Any] | None:
         info = {
@@ -353,6 +456,9 @@ class Localization:
             "covariance": np.round(self._cov, 6).tolist(),
             "particles": 0 if self._particles is None else len(self._particles),
             "localized": self.localized,
+            "converged": self.converged,
+            "map_mismatch": self.map_mismatch,
+            "match_score": round(float(self.match_score), 4),
             "global_running": self.global_running,
         }
         return {"particles": self._particles, "extras": {"localization": info}}

@@ -50,7 +50,7 @@ function renderResult(t) {
       text = `counts as reached ${within(nav)} of the goal; now ${fmt(nav.distance_to_goal)} m away`;
     } else if (o && o.distance_to_goal !== undefined && o.distance_to_goal !== null) {
       const off = `${fmt(o.distance_to_goal)} m and ${deg(o.yaw_to_goal)}° from the goal`;
-      text = o.kind === "reached" ? `reached ${within(o)}: stopped ${off}` : `${o.kind}: stopped ${off}`;
+      text = o.kind === "succeeded" ? `reached ${within(o)}: stopped ${off}` : `${o.kind}: stopped ${off}`;
     }
   }
   if (el.textContent !== text) el.textContent = text;

@@ -4,13 +4,6 @@ import { $, api, loadMe, message, upload, wireEstop } from "./core.js";
 
 let activeId = null;
 
-async function activeMap() {
-  try {
-    const loc = await (await fetch("/api/localization")).json();
-    return loc && loc.map_id !== undefined ? loc.map_id : null;
-  } catch { return null; }
-}
-
 function button(label, aria, fn, cls = "btn small") {
   const b = document.createElement("button");
   b.className = cls;
@@ -83,8 +76,11 @@ function card(m) {
 
 async function refresh() {
   let maps = [];
-  try { maps = await api("GET", "/api/maps"); } catch { return; }
-  activeId = await activeMap();
+  try {
+    const page = await api("GET", "/api/maps?limit=500"); // {total, limit, offset, items, active_map_id}
+    maps = page.items;
+    activeId = page.active_map_id;
+  } catch { return; }
   $("#gallery").replaceChildren(...maps.map(card));
   if (!maps.length) $("#gallery").textContent = "No maps yet: start mapping on the Live page, or import one.";
 }

@@ -63,7 +63,7 @@ async function loadList() {
 
 async function loadMaps() {
   try {
-    const maps = await api("GET", "/api/maps");
+    const maps = (await api("GET", "/api/maps?limit=500")).items;
     const sel = $("#filters select[name=map_id]");
     for (const m of maps) {
       const o = document.createElement("option");
@@ -88,7 +88,7 @@ async function openRun(id) {
   $("#detail-h").textContent = `Run #${run.id}`;
   $("#detail-title").innerHTML = "";
   const title = document.createElement("p");
-  title.textContent = `${run.kind} · ${when(run.started_at)} → ${when(run.ended_at)} · ${run.robot} (${run.profile}) · map ${run.map_id ?? "–"} · `;
+  title.textContent = `${run.kind} · ${when(run.started_at)} → ${when(run.ended_at)} · ${run.robot} (${run.profile_name}) · map ${run.map_id ?? "–"} · `;
   const b = document.createElement("span");
   b.className = `outcome ${run.outcome}`;
   b.textContent = run.outcome + (run.end_reason ? ` (${run.end_reason})` : "");

@@ -68,7 +68,7 @@ function render(t) {
   } else locEl.textContent = "–";
   const goal = $("#st-goal");
   if (nav && nav.active && nav.goal) {
-    goal.textContent = `${fmt(nav.distance_remaining)} m to go, ETA ${eta(nav.eta_s)}`;
+    goal.textContent = `${fmt(nav.distance_remaining_m)} m to go, ETA ${eta(nav.eta_s)}`;
   } else if (nav && nav.outcome) {
     const o = nav.outcome;
     goal.textContent = typeof o === "string" ? o : `${o.kind || o.outcome || "done"}${o.reason ? ": " + o.reason : ""}`;

@@ -2,16 +2,42 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Annotated, Any
 
-from fastapi import APIRouter
-from fastapi.responses import JSONResponse
+from fastapi import APIRouter, Depends
 from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel
+from app.api.problems import ProblemError
+from app.api.routes.maps import MapOut, active_map_id, map_out
+from app.api.routes.robot import refused
+from app.api.schemas import ERRORS, Out, Pair
+from app.features.mapping import Mapping, NoMapError
 from app.modes import TransitionRefused
 
 router = APIRouter(tags=["mapping"])
+
+
+class MappingOut(Out):
+    running: bool
+    has_map: bool
+    nodes: int = Field(description="pose-graph nodes")
+    loop_closures: int
+    map_size_m: Pair | None = Field(description="width, height in m")
+    last_optimization_ms: float | None = Field(description="ms")
+    front_end_ms: float | None = Field(description="ms per scan")
+    scans_dropped: int
+
+
+def get_mapping_feature(rt: RuntimeDep) -> Mapping:
+    mapping = rt.features.get("mapping")
+    if mapping is None:
+        raise ProblemError(503, "mapping is not running on this server", kind="mapping-unavailable")
+    return mapping  # type: ignore[return-value]
+
+
+MappingDep = Annotated[Mapping, Depends(get_mapping_feature)]
+UNAVAILABLE = ERRORS(s503="mapping is not running")
 
 
 class SaveMapIn(StrictModel):
@@ -20,72 +46,69 @@ class SaveMapIn(StrictModel):
     name: str = Field(min_length=1, max_length=100, pattern=r"\S")
 
 
-def _feature(rt: Any):
-    mapping = rt.features.get("mapping")
-    if mapping is None:
-        return None, JSONResponse({"detail": "mapping is not running"}, status_code=503)
-    return mapping, None
-
-
-@router.get("/api/mapping", summary="Mapping state: running, nodes, loop closures, map size")
-def get_mapping(rt: RuntimeDep):
-    mapping, err = _feature(rt)
-    return err or mapping.state()
+@router.get(
+    "/api/mapping",
+    response_model=MappingOut,
+    summary="Mapping state: running, nodes, loop closures, map size",
+    responses=UNAVAILABLE,
+)
+def get_mapping(mapping: MappingDep) -> MappingOut:
+    return MappingOut.model_validate(mapping.state())
 
 
 @router.post(
     "/api/mapping/start",
+    response_model=MappingOut,
     summary="Enter MAPPING with a fresh map (teleop stays allowed)",
-    responses={409: {"description": "the current mode does not allow MAPPING"}},
+    responses={**ERRORS(s409="the current mode does not allow MAPPING"), **UNAVAILABLE},
 )
-def start_mapping(rt: RuntimeDep):
-    mapping, err = _feature(rt)
-    if err:
-        return err
+def start_mapping(mapping: MappingDep) -> MappingOut:
     try:
         mapping.start()
     except TransitionRefused as exc:
-        return JSONResponse(exc.as_dict(), status_code=409)
-    return mapping.state()
+        raise refused(exc) from None
+    return MappingOut.model_validate(mapping.state())
 
 
 @router.post(
     "/api/mapping/stop",
+    response_model=MappingOut,
     summary="Leave MAPPING (to IDLE); the map is kept for saving",
-    responses={409: {"description": "the mode machine refused"}},
+    responses={**ERRORS(s409="the mode machine refused"), **UNAVAILABLE},
 )
-def stop_mapping(rt: RuntimeDep):
-    mapping, err = _feature(rt)
-    if err:
-        return err
+def stop_mapping(mapping: MappingDep) -> MappingOut:
     try:
         mapping.stop()
     except TransitionRefused as exc:
-        return JSONResponse(exc.as_dict(), status_code=409)
-    return mapping.state()
+        raise refused(exc) from None
+    return MappingOut.model_validate(mapping.state())
 
 
 @router.post(
     "/api/mapping/save",
-    summary="Store the map built by the current or last mapping session; returns its id",
+    response_model=MapOut,
+    summary="Store the map built by the current or last mapping session; returns the stored map",
+    description="A name another map has gets a version suffix (`name (2)`); the answer's `name` says.",
     status_code=201,
-    responses={409: {"description": "no map has been built"}},
+    responses={
+        **ERRORS(s409="no map has been built"),
+        **UNAVAILABLE,
+    },
 )
-def save_map(body: SaveMapIn, rt: RuntimeDep):
-    from app.features.mapping import NoMapError
-
-    mapping, err = _feature(rt)
-    if err:
-        return err
+def save_map(body: SaveMapIn, rt: RuntimeDep, mapping: MappingDep) -> MapOut:
     try:
         grid = mapping.current_map()
     except NoMapError as exc:
-        return JSONResponse({"detail": str(exc)}, status_code=409)
+        raise ProblemError(409, str(exc), kind="no-map") from None
     info = rt.maps.add(
-        body.name.strip(), grid, source="slam", robot_id=rt.robot_id, run_id=_run_id(rt, mapping)
+        rt.maps.free_name(body.name.strip()),
+        grid,
+        source="slam",
+        robot_id=rt.robot_id,
+        run_id=_run_id(rt, mapping),
     )
     mapping.saved(info.id)
-    return JSONResponse({"id": info.id, **info.as_dict()}, status_code=201)
+    return map_out(info, active_map_id(rt))
 
 
 def _run_id(rt: Any, mapping: Any) -> int | None:

@@ -8,38 +8,104 @@ import re
 from pathlib import PurePosixPath
 from typing import Annotated, Any
 
-from fastapi import APIRouter, File, Form, HTTPException, UploadFile
+from fastapi import APIRouter, File, Form, HTTPException, Query, UploadFile
 from fastapi.concurrency import run_in_threadpool
-from fastapi.responses import JSONResponse, Response
+from fastapi.responses import Response
 from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel
+from app.api.problems import ProblemError
+from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp, Triple
+from app.features.localization import map_fit
+from app.features.recording import current_map_id
+from app.map_store import MapInfo
+from app.modes import Mode
 from nav.types import OccupancyGrid
 
 router = APIRouter(tags=["maps"])
 
-
-@router.get("/api/maps", summary="All maps, stock maps last")
-def list_maps(rt: RuntimeDep) -> list[dict]:
-    return [m.as_dict() for m in rt.maps.list()]
+NOT_FOUND = ERRORS(s404="no such map")
 
 
-@router.get(
-    "/api/maps/{map_id}", summary="One map's metadata", responses={404: {"description": "no such map"}}
-)
-def get_map(map_id: int, rt: RuntimeDep) -> dict:
+class MapOut(Out):
+    """A stored map (ROS map_server geometry: ``origin`` is the lower-left cell's pose in the map frame)."""
+
+    id: int
+    name: str
+    resolution: float = Field(description="m per cell")
+    width: int = Field(description="cells")
+    height: int = Field(description="cells")
+    size_m: Pair = Field(description="width, height in m")
+    origin: Triple = Field(description="x (m), y (m), yaw (rad) of the lower-left cell")
+    source: str = Field(description="`stock` (a simulator world), `slam` (built here) or `import`")
+    is_stock: bool
+    robot_id: int | None
+    run_id: int | None = Field(description="the mapping run that built it, if any")
+    created_at: Timestamp
+    updated_at: Timestamp
+    thumbnail_url: str
+    active: bool = Field(description="true for the map the robot localizes and plans in now")
+
+
+class MapPage(Page[MapOut]):
+    """Maps, user maps newest first, stock maps last."""
+
+    active_map_id: int | None = Field(description="the active map (also flagged `active` in its item)")
+
+
+class ActivatedOut(MapOut):
+    active_map_id: int
+    match_score: float | None = Field(
+        None,
+        description="0..1: how well the current lidar scan fits this map at the robot's true pose "
+        "(simulation only; see docs/api.md, localization)",
+    )
+
+
+def active_map_id(rt: Any) -> int | None:
+    """The map the robot localizes and plans in (the localization feature's, else the world's)."""
+    loc = rt.features.get("localization")
+    if loc is not None and getattr(loc, "map_id", None) is not None:
+        return int(loc.map_id)
+    return current_map_id(rt)
+
+
+def map_out(info: MapInfo, active_id: int | None) -> MapOut:
+    return MapOut(**info.as_dict(), active=info.id == active_id)
+
+
+@router.get("/api/maps", response_model=MapPage, summary="Maps (paginated like /api/runs), stock maps last")
+def list_maps(
+    rt: RuntimeDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 50,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> MapPage:
+    maps = rt.maps.list()
+    active = active_map_id(rt)
+    return MapPage(
+        total=len(maps),
+        limit=limit,
+        offset=offset,
+        items=[map_out(m, active) for m in maps[offset : offset + limit]],
+        active_map_id=active,
+    )
+
+
+@router.get("/api/maps/{map_id}", response_model=MapOut, summary="One map's metadata", responses=NOT_FOUND)
+def get_map(map_id: DbId, rt: RuntimeDep) -> MapOut:
     info = rt.maps.info(map_id)
     if info is None:
         raise HTTPException(404, f"no map with id {map_id}")
-    return info.as_dict()
+    return map_out(info, active_map_id(rt))
 
 
 @router.get(
     "/api/maps/{map_id}/thumbnail.png",
+    response_class=Response,
     summary="A small PNG preview",
-    responses={404: {"description": "no such map"}, 200: {"content": {"image/png": {}}}},
+    responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
-def thumbnail(map_id: int, rt: RuntimeDep) -> Response:
+def thumbnail(map_id: DbId, rt: RuntimeDep) -> Response:
     png = rt.maps.thumbnail(map_id)
     if png is None:
         raise HTTPException(404, f"no map with id {map_id}")
@@ -68,10 +134,11 @@ def _attachment(filename: str) -> dict[str, str]:
 
 @router.get(
     "/api/maps/{map_id}/map.yaml",
+    response_class=Response,
     summary="The map's YAML as map_saver writes it (image: map.pgm)",
-    responses={404: {"description": "no such map"}, 200: {"content": {"application/x-yaml": {}}}},
+    responses={**NOT_FOUND, 200: {"content": {"application/x-yaml": {}}}},
 )
-def export_yaml(map_id: int, rt: RuntimeDep) -> Response:
+def export_yaml(map_id: DbId, rt: RuntimeDep) -> Response:
     from maps.mapio import encode_yaml
 
     body = encode_yaml(_grid(rt, map_id), PGM_NAME)
@@ -80,10 +147,11 @@ def export_yaml(map_id: int, rt: RuntimeDep) -> Response:
 
 @router.get(
     "/api/maps/{map_id}/map.pgm",
+    response_class=Response,
     summary="The map's P5 PGM as map_saver writes it (254 free, 0 occupied, 205 unknown)",
-    responses={404: {"description": "no such map"}, 200: {"content": {"image/x-portable-graymap": {}}}},
+    responses={**NOT_FOUND, 200: {"content": {"image/x-portable-graymap": {}}}},
 )
-def export_pgm(map_id: int, rt: RuntimeDep) -> Response:
+def export_pgm(map_id: DbId, rt: RuntimeDep) -> Response:
     from maps.mapio import encode_pgm
 
     body = encode_pgm(_grid(rt, map_id))
@@ -92,10 +160,11 @@ def export_pgm(map_id: int, rt: RuntimeDep) -> Response:
 
 @router.get(
     "/api/maps/{map_id}/image.png",
+    response_class=Response,
     summary="The whole map as a PNG, one pixel per cell (map_saver's grey levels, top row = max y)",
-    responses={404: {"description": "no such map"}, 200: {"content": {"image/png": {}}}},
+    responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
-def full_image(map_id: int, rt: RuntimeDep) -> Response:
+def full_image(map_id: DbId, rt: RuntimeDep) -> Response:
     from maps.png import encode_png
     from maps.render import grid_to_grey
 
@@ -128,11 +197,15 @@ def _upload_name(yaml: UploadFile, name: str | None) -> str:
 @router.post(
     "/api/maps/import",
     summary="Upload a map_server map: YAML + image (PGM or PNG); returns the stored map",
+    description="Map names are unique: importing under a name a map already has (the same files twice, "
+    "say) stores the map as a new version named `name (2)`, `name (3)`...; the answer's `name` is the "
+    "one it got. Renaming to a taken name is refused (409).",
     status_code=201,
-    responses={
-        413: {"description": "the upload or the image is larger than the configured limit"},
-        422: {"description": "corrupt or truncated image, missing or wrong YAML field, unsupported mode"},
-    },
+    response_model=MapOut,
+    responses=ERRORS(
+        s413="the upload or the image is larger than the configured limit",
+        s422="corrupt or truncated image, missing or wrong YAML field, unsupported mode",
+    ),
 )
 async def import_map(
     rt: RuntimeDep,
@@ -146,23 +219,35 @@ async def import_map(
     yaml_bytes = await yaml.read(limit + 1)
     image_bytes = await image.read(limit + 1)
     if len(yaml_bytes) > limit or len(image_bytes) > limit:
-        return JSONResponse({"detail": f"upload larger than {limit} bytes"}, status_code=413)
+        raise ProblemError(413, f"upload larger than {limit} bytes", kind="too-large")
     max_pixels = int(getattr(rt.settings, "max_map_pixels", DEFAULT_MAX_PIXELS))
     pixels = image_pixels(image_bytes)
     if pixels is not None and pixels > max_pixels:
-        return JSONResponse(
-            {"detail": f"image has {pixels} pixels, more than the limit of {max_pixels}"}, status_code=413
+        raise ProblemError(
+            413, f"image has {pixels} pixels, more than the limit of {max_pixels}", kind="too-large"
         )
     try:
         grid = await run_in_threadpool(
             read_map_bytes, yaml_bytes, image_bytes, image.filename or "", max_pixels
         )
     except MapFormatError as exc:
-        return JSONResponse({"detail": str(exc)}, status_code=422)
-    info = await run_in_threadpool(
-        rt.maps.add, _upload_name(yaml, name), grid, source="import", robot_id=rt.robot_id
-    )
-    return JSONResponse(info.as_dict(), status_code=201)
+        raise ProblemError(422, str(exc), kind="invalid-map") from None
+    map_name = rt.maps.free_name(_upload_name(yaml, name))
+    info = await run_in_threadpool(rt.maps.add, map_name, grid, source="import", robot_id=rt.robot_id)
+    return map_out(info, active_map_id(rt))
+
+
+def refuse_taken_name(rt: Any, name: str, *, own_id: int | None = None) -> None:
+    """409 when another map already has ``name``: two maps with one name cannot be told apart."""
+    taken = rt.maps.find(name)
+    if taken is not None and taken.id != own_id:
+        raise ProblemError(
+            409,
+            f"a map named {name!r} exists already (id {taken.id}): choose another name, or rename or "
+            "delete that map",
+            kind="map-name-taken",
+            existing_id=taken.id,
+        )
 
 
 # --------------------------------------------------------------------------- rename, delete, activate
@@ -181,31 +266,46 @@ def _user_map(rt: Any, map_id: int, what: str):
     if info.is_stock:
         # Stock maps are the simulator's worlds, registered again by name at every start: renaming
         # or deleting one would only make a duplicate appear. Import a copy to change it.
-        raise HTTPException(409, f"map {map_id} is a stock map (a simulator world) and cannot be {what}")
+        raise ProblemError(
+            409, f"map {map_id} is a stock map (a simulator world) and cannot be {what}", kind="stock-map"
+        )
     return info
 
 
 @router.patch(
     "/api/maps/{map_id}",
-    summary="Rename a map",
-    responses={404: {"description": "no such map"}, 409: {"description": "stock maps cannot be renamed"}},
+    summary="Rename a map (names are unique)",
+    response_model=MapOut,
+    responses={**NOT_FOUND, **ERRORS(s409="a stock map, or another map has this name (`existing_id`)")},
 )
-def rename_map(map_id: int, body: RenameIn, rt: RuntimeDep) -> dict:
+def rename_map(map_id: DbId, body: RenameIn, rt: RuntimeDep) -> MapOut:
     _user_map(rt, map_id, "renamed")
+    refuse_taken_name(rt, body.name.strip(), own_id=map_id)
     info = rt.maps.rename(map_id, body.name.strip())
     if info is None:
         raise HTTPException(404, f"no map with id {map_id}")
-    return info.as_dict()
+    return map_out(info, active_map_id(rt))
 
 
 @router.delete(
     "/api/maps/{map_id}",
-    summary="Delete a map (stock maps cannot be deleted)",
+    summary="Delete a map (not a stock map, not the active one)",
     status_code=204,
-    responses={404: {"description": "no such map"}, 409: {"description": "stock maps cannot be deleted"}},
+    responses={
+        **NOT_FOUND,
+        **ERRORS(s409="a stock map, or the active map (`active_map_id`): activate another map first"),
+    },
 )
-def delete_map(map_id: int, rt: RuntimeDep) -> Response:
+def delete_map(map_id: DbId, rt: RuntimeDep) -> Response:
     _user_map(rt, map_id, "deleted")
+    if active_map_id(rt) == map_id:
+        raise ProblemError(
+            409,
+            f"map {map_id} is the active map (localization and navigation use it): activate another "
+            "map first (POST /api/maps/{id}/activate), then delete this one",
+            kind="active-map",
+            active_map_id=map_id,
+        )
     if not rt.maps.delete(map_id):
         raise HTTPException(404, f"no map with id {map_id}")
     return Response(status_code=204)
@@ -214,22 +314,21 @@ def delete_map(map_id: int, rt: RuntimeDep) -> Response:
 @router.post(
     "/api/maps/{map_id}/activate",
     summary="Make this the active map for localization, navigation and the 3D view",
-    responses={404: {"description": "no such map"}, 409: {"description": "not while MAPPING"}},
+    response_model=ActivatedOut,
+    responses={**NOT_FOUND, **ERRORS(s409="not while MAPPING; in simulation, not a map of another world")},
 )
-def activate_map(map_id: int, rt: RuntimeDep):
-    from app.modes import Mode
-
+def activate_map(map_id: DbId, rt: RuntimeDep) -> ActivatedOut:
     session = rt.session
     if session.modes.mode == Mode.MAPPING:
-        return JSONResponse(
-            {"detail": "stop mapping before activating a map", "mode": session.modes.mode.value},
-            status_code=409,
+        raise ProblemError(
+            409, "stop mapping before activating a map", kind="mode-refused", mode=session.modes.mode.value
         )
     info = rt.maps.info(map_id)
     if info is None:
         raise HTTPException(404, f"no map with id {map_id}")
     grid = _grid(rt, map_id)
     loc = rt.features.get("localization")
+    score = _refuse_other_world(rt, loc, grid, map_id)
     if loc is not None and hasattr(loc, "set_map"):
         loc.set_map(grid, map_id)
         mapping = rt.features.get("mapping")
@@ -241,4 +340,38 @@ def activate_map(map_id: int, rt: RuntimeDep):
         session.set_grid(grid)
     rt.active_map_id = map_id
     session.add_event("map", map_id=map_id, reason="map activated")
-    return {"active_map_id": map_id, **info.as_dict()}
+    return ActivatedOut(**map_out(info, map_id).model_dump(), active_map_id=map_id, match_score=score)
+
+
+SIM_MATCH_RATIO = 0.8
+"""In simulation a map is the world's when the lidar's scan fits it at least this fraction as well as
+it fits the world's own map (the same measure, ``Amcl.quality``): a copy of the world's map scores 1,
+a map of another world far less (docs/api.md has the measured figures)."""
+
+
+def _refuse_other_world(rt: Any, loc: Any, grid: OccupancyGrid, map_id: int) -> float | None:
+    """In simulation, 409 for a map the lidar does not see. The latest scan's fit to the map, at the
+    robot's true pose (a map in the world's frame) or at its current estimate (a map in the current
+    map frame, e.g. the one mapping just built), is compared with its fit to the world's own map at the
+    true pose. Returns the map's score (None on a real robot, or without a scan)."""
+    truth = getattr(rt.session.driver, "truth_pose", None)
+    world = rt.maps.find(rt.world_name, stock=True) if rt.world_name else None
+    world_grid = None if world is None else rt.maps.grid(world.id)
+    if loc is None or truth is None or world_grid is None:
+        return None
+    score = map_fit(loc, grid, [truth, rt.session.pose])
+    reference = map_fit(loc, world_grid, [truth])
+    if score is None or not reference:
+        return None
+    if score < SIM_MATCH_RATIO * reference:
+        raise ProblemError(
+            409,
+            f"map {map_id} does not match what the lidar sees in the simulated world {rt.world_name!r} "
+            f"(scan fit {score:.2f}, the world's own map {reference:.2f}; at least {SIM_MATCH_RATIO:g} x "
+            "that is needed): activate this world's map, or serve the world this map was made of",
+            kind="map-mismatch",
+            match_score=round(score, 4),
+            world_match_score=round(reference, 4),
+            world=rt.world_name,
+        )
+    return round(score, 4)

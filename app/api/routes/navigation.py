@@ -2,15 +2,17 @@
 
 from __future__ import annotations
 
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter
-from fastapi.responses import JSONResponse
+from fastapi import APIRouter, Depends
+from pydantic import Field
 
 from app.api.deps import ActorDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError, problem_responses
-from app.api.routes.missions import get_missions, start_mission
+from app.api.routes.missions import MissionsDep, start_mission
+from app.api.schemas import NavigationOut, public_navigation
 from app.features.missions import MissionEnded
+from app.features.navigation import Navigation
 from nav.types import Pose2D
 
 router = APIRouter(tags=["navigation"])
@@ -31,15 +33,29 @@ class GoalIn(StrictModel):
     controller: Literal["dwa", "teb"] | None = None
 
 
-def _feature(rt: Any):
+def get_navigation_feature(rt: RuntimeDep) -> Navigation:
     nav = rt.features.get("navigation")
     if nav is None:
-        return None, JSONResponse({"detail": "navigation is not running"}, status_code=503)
-    return nav, None
+        raise ProblemError(503, "navigation is not running on this server", kind="navigation-unavailable")
+    return nav  # type: ignore[return-value]
 
 
-def navigation_state(nav: Any) -> dict:
-    state = nav.state()
+NavigationDep = Annotated[Navigation, Depends(get_navigation_feature)]
+UNAVAILABLE = problem_responses(s503="navigation is not running")
+
+
+class GoalsOut(NavigationOut):
+    mission_id: str = Field(description="the mission this request became: wait on it")
+    mission_url: str
+
+
+class CancelOut(NavigationOut):
+    canceled: bool = Field(description="a request was running and is now stopping")
+    mission_id: str | None
+
+
+def navigation_state(nav: Any) -> dict[str, Any]:
+    state = public_navigation(nav.state())
     path = nav.path()
     state["path"] = [] if path is None else path.poses[:, :2].round(3).tolist()
     return state
@@ -47,12 +63,12 @@ def navigation_state(nav: Any) -> dict:
 
 @router.get(
     "/api/navigation",
+    response_model=NavigationOut,
     summary="State, current goal and waypoints, path, feedback and the last outcome",
-    responses={503: {"description": "navigation is not running"}},
+    responses=UNAVAILABLE,
 )
-def get_navigation(rt: RuntimeDep):
-    nav, err = _feature(rt)
-    return err or navigation_state(nav)
+def get_navigation(nav: NavigationDep) -> NavigationOut:
+    return NavigationOut.model_validate(navigation_state(nav))
 
 
 @router.post(
@@ -64,17 +80,20 @@ def get_navigation(rt: RuntimeDep):
     "goes quiet, closes its sockets or its lease ends (only teleop has a deadman); it ends when reached "
     "or failed, by a cancel, a new mission, a mode request or the e-stop. See the lease rules in the API "
     "description.",
-    responses=problem_responses(
-        s409="not localized, e-stop, fault, the mode does not allow navigating, or another client holds "
-        "control",
-        s422="goal off the map, in an obstacle or its inscribed radius (`reason`, `index`, `nearest_free`), "
-        "or an unknown or conflicting controller",
-    ),
+    response_model=GoalsOut,
+    responses={
+        **problem_responses(
+            s409="not localized, e-stop, fault, the mode does not allow navigating, or another client "
+            "holds control",
+            s422="goal off the map, in an obstacle or its inscribed radius (`reason`, `index`, "
+            "`nearest_free`), or an unknown or conflicting controller",
+        ),
+        **UNAVAILABLE,
+    },
 )
-def post_goals(body: GoalIn | list[GoalIn], rt: RuntimeDep, actor: ActorDep):
-    nav, err = _feature(rt)
-    if err:
-        return err
+def post_goals(
+    body: GoalIn | list[GoalIn], nav: NavigationDep, missions: MissionsDep, actor: ActorDep
+) -> GoalsOut:
     goals = body if isinstance(body, list) else [body]
     named = {g.controller for g in goals if g.controller is not None}
     if len(named) > 1:
@@ -83,23 +102,22 @@ def post_goals(body: GoalIn | list[GoalIn], rt: RuntimeDep, actor: ActorDep):
             f"controller: one request drives with one controller, got {sorted(named)}",
             kind="invalid-request",
         )
-    missions = get_missions(rt)
     m = start_mission(
         missions, [Pose2D(g.x, g.y, g.theta) for g in goals], named.pop() if named else None, actor
     )
     # the new state (the loop picks the request up on its next tick), and the mission to wait on
-    return {**navigation_state(nav), "mission_id": m.id, "mission_url": f"/api/missions/{m.id}"}
+    return GoalsOut.model_validate(
+        {**navigation_state(nav), "mission_id": m.id, "mission_url": f"/api/missions/{m.id}"}
+    )
 
 
 @router.post(
     "/api/navigation/cancel",
-    summary="Cancel navigation (the robot stops, outcome 'cancelled'); answers the new state",
+    response_model=CancelOut,
+    summary="Cancel navigation (the robot stops, state `canceled`); answers the new state",
+    responses=UNAVAILABLE,
 )
-def cancel(rt: RuntimeDep, actor: ActorDep):
-    nav, err = _feature(rt)
-    if err:
-        return err
-    missions = get_missions(rt)
+def cancel(nav: NavigationDep, missions: MissionsDep, actor: ActorDep) -> CancelOut:
     m = missions.for_request(nav.current_request)
     if m is None:
         was_running = nav.cancel(actor=actor)
@@ -109,16 +127,17 @@ def cancel(rt: RuntimeDep, actor: ActorDep):
             was_running = True
         except MissionEnded:  # it ended between the look-up and the cancel
             was_running = False
-    return {**navigation_state(nav), "cancelled": was_running, "mission_id": None if m is None else m.id}
+    return CancelOut.model_validate(
+        {**navigation_state(nav), "canceled": was_running, "mission_id": None if m is None else m.id}
+    )
 
 
 @router.post(
     "/api/navigation/costmap_view",
+    response_model=NavigationOut,
     summary="Which costmap the 3D view overlays: the global one or the 3 x 3 m local window",
+    responses=UNAVAILABLE,
 )
-def set_costmap_view(body: CostmapViewIn, rt: RuntimeDep):
-    nav, err = _feature(rt)
-    if err:
-        return err
+def set_costmap_view(body: CostmapViewIn, nav: NavigationDep) -> NavigationOut:
     nav.costmap_view = body.view
-    return navigation_state(nav)
+    return NavigationOut.model_validate(navigation_state(nav))

@@ -4,13 +4,15 @@ from __future__ import annotations
 
 import contextlib
 from datetime import date, datetime, time, timedelta
-from typing import Annotated, Literal
+from typing import Annotated, Any, Literal
 
 from fastapi import APIRouter, Depends, HTTPException, Query, WebSocket
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
+from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel, get_runtime
+from app.api.schemas import ERRORS, DbId, OpenOut, Out, Page, Pair, Timestamp, Triple
 from app.export.data import RunData, load_run
 from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, utc_aware
 from app.runtime import Runtime
@@ -21,8 +23,107 @@ Kind = Literal["teleop", "mapping", "navigation"]
 Outcome = Literal["recording", "completed", "succeeded", "failed", "aborted", "stopped", "interrupted"]
 assert set(Kind.__args__) == set(KINDS) and set(Outcome.__args__) == set(OUTCOMES)  # type: ignore[attr-defined]
 
-NOT_FOUND = {404: {"description": "no such run"}}
-RECORDING = {409: {"description": "the run is still recording"}}
+NOT_FOUND = ERRORS(s404="no such run")
+RECORDING = ERRORS(s409="the run is still recording")
+NO_RECORDING = ERRORS(s503="run recording is not enabled on this server")
+
+
+class RunOut(Out):
+    """A recorded run. Times inside a run (``t`` of events, goals, samples) are seconds since it started."""
+
+    id: int
+    kind: Kind
+    robot: str
+    robot_id: int | None
+    profile_name: str = Field(description="the robot profile it ran with")
+    map_id: int | None
+    started_at: Timestamp
+    ended_at: Timestamp | None
+    outcome: Outcome
+    end_reason: str
+    duration_s: float
+    distance_m: float
+    summary: dict[str, Any] = Field(description="metrics of the run (distance, goals reached...)")
+
+
+class RunEventOut(OpenOut):
+    """One event; its other fields depend on ``type``."""
+
+    t: float = Field(description="s since the run started")
+    type: str
+
+
+class RunGoalOut(Out):
+    t: float = Field(description="s since the run started")
+    t_end: float | None = Field(description="s since the run started, when it ended")
+    x: float = Field(description="m")
+    y: float = Field(description="m")
+    theta: float = Field(description="rad")
+    outcome: str = Field(description="`pending`, `succeeded`, `failed` or `canceled`")
+    reason: str
+
+
+class RunDetail(RunOut):
+    events: list[RunEventOut]
+    goals: list[RunGoalOut]
+    plans: int
+    scans: int
+    maps: int
+
+
+class RunMapGeometry(Out):
+    resolution: float = Field(description="m per cell")
+    width: int
+    height: int
+    origin: Triple = Field(description="x (m), y (m), yaw (rad)")
+    image_url: str
+
+
+class TrajectoryOut(Out):
+    run_id: int
+    count: int = Field(description="samples in the range, before decimation")
+    step: int = Field(description="every step-th sample is returned")
+    samples: dict[str, list[Any]] = Field(description="columns: t (s since the run started), x, y...")
+    map: RunMapGeometry | None = None
+
+
+class ScanAt(Out):
+    t: float = Field(description="s since the run started")
+    points: list[Pair] = Field(description="map frame, m")
+
+
+class PlanAt(Out):
+    t: float = Field(description="s since the run started")
+    poses: list[Pair] = Field(description="map frame, m")
+
+
+class RunStateOut(Out):
+    t: float = Field(description="s since the run started")
+    pose: Triple = Field(description="x (m), y (m), theta (rad), map frame")
+    velocity: Triple = Field(description="vx, vy (m/s), wz (rad/s)")
+    command: Triple = Field(description="vx, vy (m/s), wz (rad/s)")
+    mode: str
+    behavior: str | None
+    scan: ScanAt | None = None
+    plan: PlanAt | None = None
+
+
+class ReplayOut(Out):
+    run_id: int | None
+    t: float = Field(description="s since the run started")
+    duration: float = Field(description="s")
+    playing: bool
+    speed: float = Field(description="playback speed factor")
+    viewer: bool
+
+
+def run_out(d: dict[str, Any]) -> dict[str, Any]:
+    """The store's run dict under the API's names (``profile`` is the profile object elsewhere)."""
+    out = dict(d)
+    out["profile_name"] = out.pop("profile", "")
+    return out
+
+
 PARTIAL_HEADER = "X-Run-Partial"
 PARTIAL = {
     PARTIAL_HEADER: {
@@ -76,7 +177,11 @@ def _found(fn, *args):
         raise HTTPException(404, f"no run with id {args[0]}") from None
 
 
-@router.get("/api/runs", summary="Recorded runs, newest first, with filters and pagination")
+@router.get(
+    "/api/runs",
+    response_model=Page[RunOut],
+    summary="Recorded runs, newest first, with filters and pagination",
+)
 def list_runs(
     store: StoreDep,
     kind: Kind | None = None,
@@ -92,21 +197,27 @@ def list_runs(
     if t0 is not None and t1 is not None and t1 <= t0:
         raise _bad("until", "must be after since")
     total, items = store.list(RunFilters(kind, outcome, map_id, robot, t0, t1), limit, offset)
-    return {"total": total, "limit": limit, "offset": offset, "items": items}
+    return {"total": total, "limit": limit, "offset": offset, "items": [run_out(r) for r in items]}
 
 
-@router.get("/api/runs/{run_id}", summary="One run: summary metrics, events, goals", responses=NOT_FOUND)
-def get_run(run_id: int, store: StoreDep) -> dict:
-    return _found(store.detail, run_id)
+@router.get(
+    "/api/runs/{run_id}",
+    response_model=RunDetail,
+    summary="One run: summary metrics, events, goals",
+    responses=NOT_FOUND,
+)
+def get_run(run_id: DbId, store: StoreDep) -> dict:
+    return run_out(_found(store.detail, run_id))
 
 
 @router.get(
     "/api/runs/{run_id}/trajectory",
     summary="Trajectory samples as columns (decimated to max_points), with the run's map geometry",
+    response_model=TrajectoryOut,
     responses=NOT_FOUND,
 )
 def trajectory(
-    run_id: int,
+    run_id: DbId,
     store: StoreDep,
     t0: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     t1: Annotated[float | None, Query(allow_inf_nan=False)] = None,
@@ -134,10 +245,11 @@ def trajectory(
 
 @router.get(
     "/api/runs/{run_id}/map.png",
+    response_class=Response,
     summary="The map as the run last saw it, full size (map_saver grey levels, top row first)",
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
-def run_map_png(run_id: int, store: StoreDep) -> Response:
+def run_map_png(run_id: DbId, store: StoreDep) -> Response:
     from maps.png import encode_png
     from maps.render import grid_to_grey
 
@@ -151,6 +263,7 @@ def run_map_png(run_id: int, store: StoreDep) -> Response:
 @router.get(
     "/api/runs/{run_id}/state",
     summary="Replay seek: the run as it was at time t (pose, speeds, scan points, plan, goal)",
+    response_model=RunStateOut,
     responses=NOT_FOUND,
 )
 def state_at(
@@ -187,11 +300,12 @@ def state_at(
 
 @router.get(
     "/api/runs/{run_id}/export.mcap",
+    response_class=Response,
     summary="Download as MCAP with ROS 2 messages (Foxglove, ros2 bag)",
     description=EXPORT_NOTE,
     responses={**NOT_FOUND, 200: {"content": {"application/octet-stream": {}}, "headers": PARTIAL}},
 )
-def export_mcap(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
+def export_mcap(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
     from app.export.mcap import mcap_bytes
 
     data = _load(store, run_id, rt)
@@ -202,9 +316,24 @@ def export_mcap(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
     "/api/runs/{run_id}/export.json",
     summary="Download everything as JSON (samples as columns; scans with ?scans=true)",
     description=EXPORT_NOTE,
-    responses={**NOT_FOUND, 200: {"headers": PARTIAL}},
+    responses={
+        **NOT_FOUND,
+        200: {
+            "headers": PARTIAL,
+            "content": {
+                "application/json": {
+                    "schema": {
+                        "type": "object",
+                        "required": ["run"],
+                        "description": "the run (`run`: as `GET /api/runs/{id}`), its events, goals, "
+                        "plans, maps and samples as columns; `partial` while it records",
+                    }
+                }
+            },
+        },
+    },
 )
-def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
+def export_json(run_id: DbId, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
     from app.export.tabular import run_json
 
     data = _load(store, run_id, rt)
@@ -213,11 +342,12 @@ def export_json(run_id: int, store: StoreDep, rt: RuntimeDep, scans: bool = Fals
 
 @router.get(
     "/api/runs/{run_id}/export.csv",
+    response_class=Response,
     summary="Download the trajectory samples as CSV",
     description=EXPORT_NOTE,
     responses={**NOT_FOUND, 200: {"content": {"text/csv": {}}, "headers": PARTIAL}},
 )
-def export_csv(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
+def export_csv(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
     from app.export.tabular import samples_csv
 
     data = _load(store, run_id, rt)
@@ -225,7 +355,7 @@ def export_csv(run_id: int, store: StoreDep, rt: RuntimeDep) -> Response:
 
 
 @router.delete("/api/runs/{run_id}", status_code=204, responses={**NOT_FOUND, **RECORDING})
-def delete_run(run_id: int, store: StoreDep) -> Response:
+def delete_run(run_id: DbId, store: StoreDep) -> Response:
     run = _found(store.run, run_id)
     if run["outcome"] == "recording":
         raise HTTPException(409, f"run {run_id} is still recording")
@@ -259,17 +389,22 @@ class ReplayCommand(StrictModel):
     """Replay control: load a run, then play / pause / seek (t, s) / speed (factor)."""
 
     action: Literal["load", "play", "pause", "seek", "speed"]
-    run_id: int | None = None
+    run_id: int | None = Field(None, ge=1, le=2**63 - 1)
     t: float | None = None
     speed: float | None = None
 
 
-@router.get("/api/replay", summary="Replay player state")
+@router.get("/api/replay", response_model=ReplayOut, summary="Replay player state", responses=NO_RECORDING)
 def replay_state(rt: RuntimeDep) -> dict:
     return _recording(rt).replay.state()
 
 
-@router.post("/api/replay", summary="Control the replay in the 3D view (served at /replay/viz/)")
+@router.post(
+    "/api/replay",
+    response_model=ReplayOut,
+    summary="Control the replay in the 3D view (served at /replay/viz/)",
+    responses={**NOT_FOUND, **ERRORS(s409="the player refused (no run loaded...)"), **NO_RECORDING},
+)
 def replay_control(cmd: ReplayCommand, rt: RuntimeDep) -> dict:
     from app.runs.replay import ReplayError
 

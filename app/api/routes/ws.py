@@ -9,10 +9,15 @@ import math
 import time
 import uuid
 from dataclasses import replace
+from typing import Literal
 
 from fastapi import APIRouter, WebSocket, WebSocketDisconnect
+from fastapi.responses import JSONResponse, Response
+from pydantic import Field
 from starlette.websockets import WebSocketState
 
+from app.api.schemas import ERRORS, Out
+from app.api.ws_schema import SCHEMAS, json_schema
 from app.auth import Principal, Role
 from app.limits import CommandRefused
 from app.modes import Mode, TransitionRefused, driving_hint
@@ -24,6 +29,9 @@ from app.telemetry import snapshot_dict
 from nav.types import Twist2D
 
 router = APIRouter()
+
+WsSchemaName = Literal["telemetry", "teleop-in", "teleop-out"]
+assert set(WsSchemaName.__args__) == set(SCHEMAS)  # type: ignore[attr-defined]
 
 UNSUPPORTED_DATA = 1003
 MAX_TELEOP_FRAME = 4096  # bytes: a Twist is ~100
@@ -271,3 +279,32 @@ async def telemetry(ws: WebSocket) -> None:
         if ws.client_state == WebSocketState.CONNECTED:
             with contextlib.suppress(Exception):
                 await ws.close()
+
+
+# ---------------------------------------------------------------------------------------------- schemas
+class SchemaIndex(Out):
+    schemas: dict[str, str] = Field(description="message kind -> URL of its JSON Schema")
+
+
+@router.get(
+    "/api/schemas/ws",
+    response_model=SchemaIndex,
+    tags=["schemas"],
+    summary="The websocket messages' JSON Schemas: telemetry, teleop-in, teleop-out",
+)
+def ws_schema_index() -> SchemaIndex:
+    return SchemaIndex(schemas={name: f"/api/schemas/ws/{name}.json" for name in SCHEMAS})
+
+
+@router.get(
+    "/api/schemas/ws/{name}.json",
+    response_class=Response,
+    tags=["schemas"],
+    summary="One websocket message kind as JSON Schema (2020-12)",
+    responses={
+        200: {"content": {"application/schema+json": {"schema": {"type": "object"}}}},
+        **ERRORS(s404="no such message kind"),
+    },
+)
+def ws_schema(name: WsSchemaName) -> JSONResponse:
+    return JSONResponse(json_schema(name), media_type="application/schema+json")
