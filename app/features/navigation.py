@@ -392,9 +392,14 @@ class Navigation:
         o = self.options
         infl = InflationOptions(o.inflation_radius, o.cost_scaling_factor)
         inscribed = self.profile.inscribed_radius
+        grid = self.localization.grid
+        half_cell = 0.5 * (grid.resolution if grid is not None else 0.05)
         limit = 252  # Nav2's rule: anything below the inscribed cost
-        if o.gap_margin > 0:  # a cell nearer than inscribed + margin to an obstacle costs more: blocked
-            limit = min(limit, int(inflation_cost(inscribed + o.gap_margin, inscribed, infl)))
+        if o.gap_margin > 0:
+            # Inflation measures from obstacle cell centres, half a cell behind the obstacle's edge:
+            # a centre nearer than inscribed + margin to that edge costs more than this, blocked.
+            clearance = inscribed + o.gap_margin + half_cell
+            limit = min(limit, int(inflation_cost(clearance, inscribed, infl)))
         return PlannerOptions(allow_unknown=o.allow_unknown, unknown_cost=o.unknown_cost, max_cost=limit)
 
     def _costmap_options(self, rolling: bool):
