@@ -3,7 +3,10 @@ agreeing (gaps, stalls). Simulated stacks run on a virtual clock."""
 
 from __future__ import annotations
 
+import contextlib
+import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -12,10 +15,11 @@ from app.commands.sim_nav import SimStack, build_sim_stack, unknown_grid
 from app.features.navigation import GoalRejected
 from bench.scenarios.forest import PROFILE, forest_trial
 from nav.control import GoalChecker, ProgressChecker
+from nav.control.errors import ControllerError
 from nav.control.progress_checker import ProgressCheckerOptions
 from nav.costmap import Costmap2D, CostmapOptions
 from nav.navigator import Navigator, NavState
-from nav.planning import AStarPlanner, NoValidPathFound
+from nav.planning import AStarPlanner, NoValidPathFound, PlannerOptions
 from nav.types import (
     FREE_SPACE,
     LETHAL_OBSTACLE,
@@ -24,9 +28,11 @@ from nav.types import (
     Costmap,
     GridGeometry,
     OccupancyGrid,
-    Path,
     Pose2D,
     Twist2D,
+)
+from nav.types import (
+    Path as NavPath,
 )
 from robot.sim import World
 
@@ -74,7 +80,6 @@ def test_unknown_cost_is_the_operators() -> None:
     costs[10:50, 20:60] = NO_INFORMATION
     cm = Costmap(geo, costs)
     start, goal = Pose2D(0.5, 1.5, 0.0), Pose2D(3.5, 1.5, 0.0)
-    from nav.planning import PlannerOptions
 
     raw = AStarPlanner(PlannerOptions(cost_travel_multiplier=2.0)).plan(cm, start, goal)
     free = AStarPlanner(PlannerOptions(cost_travel_multiplier=2.0, unknown_cost=0)).plan(cm, start, goal)
@@ -119,12 +124,10 @@ def test_reversing_into_an_unseen_obstacle_is_refused() -> None:
         assert local.cost_at(np.array([[2.58, 2.0]]))[0] == NO_INFORMATION  # never seen
         back = np.column_stack((np.linspace(3.0, 1.5, 31), np.full(31, 2.0), np.zeros(31)))
         dwa = st.navigation.navigator.controllers["dwa"]
-        dwa.set_path(Path(back))
+        dwa.set_path(NavPath(back))
         pose = st.driver.truth_pose
-        try:
+        with contextlib.suppress(ControllerError):  # no legal trajectory at all is a refusal too
             dwa.compute(pose, ZERO_TWIST, local)
-        except Exception:  # no legal trajectory at all is a refusal too
-            pass
         dbg = dwa.last_debug
         assert dbg is not None
         reversing = dbg.legal & (dbg.twists[:, 0] < -0.02)
@@ -137,7 +140,7 @@ def test_reversing_into_an_unseen_obstacle_is_refused() -> None:
 
 
 # --------------------------------------------------------------------------- planner and controller agree
-def _wall_with_gap(free_cells: int) -> Costmap2D:
+def _wall_with_gap(free_cells: int) -> OccupancyGrid:
     """A 4 x 3 m map with a wall across x = 2 m and one gap of ``free_cells`` cells in it."""
     grid = _grid(4.0, 3.0)
     c = 40
@@ -170,7 +173,7 @@ def test_gap_narrower_than_robot_plus_margin_not_planned_through(free_cells: int
 class StandStill:
     """A controller that commands standing still while following (what the issue saw for 85 s)."""
 
-    def set_path(self, path: Path) -> None:
+    def set_path(self, path: NavPath) -> None:
         pass
 
     def compute(self, pose: Pose2D, velocity: Twist2D, costmap: Costmap) -> tuple[Twist2D, None]:
@@ -232,3 +235,42 @@ def test_stall_recovered_long_before_the_no_progress_timeout() -> None:
         assert st.navigation.recoveries >= 1
     finally:
         st.session.close()
+
+
+# --------------------------------------------------------------------------- sim-nav --no-prior-map
+APARTMENT = Path(__file__).resolve().parent.parent / "maps" / "stock" / "apartment.yaml"
+
+
+def _cli(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str, str]:
+    from app.cli import main
+
+    try:
+        code = main(list(args))
+    except SystemExit as exc:  # argparse errors
+        code = int(exc.code or 0)
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_sim_nav_without_a_prior_map_reaches_the_goal(capsys: pytest.CaptureFixture) -> None:
+    code, out, err = _cli(
+        capsys, "sim-nav", "--no-prior-map", "--world", str(APARTMENT), "--start", "3,3.5,0",
+        "--goal", "3,1.2,-1.57", "--json",
+    )  # fmt: skip
+    assert code == 0, err
+    d = json.loads(out)
+    assert d["reached"] is True and d["collisions"] == 0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--no-prior-map", "--localization", "amcl", "--world", str(APARTMENT)], "--localization truth"),
+        (["--no-prior-map"], "--map is required"),
+    ],
+)
+def test_sim_nav_no_prior_map_bad_input_exits_2(
+    capsys: pytest.CaptureFixture, args: list[str], message: str
+) -> None:
+    code, _, err = _cli(capsys, "sim-nav", *args, "--start", "3,3.5,0", "--goal", "3,1.2,0")
+    assert code == 2 and message in err
