@@ -89,7 +89,8 @@ def get_navigation(nav: NavigationDep) -> NavigationOut:
             s409="not localized, e-stop, fault, the mode does not allow navigating, or another client "
             "holds control",
             s422="goal off the map, in an obstacle or its inscribed radius (`reason`, `index`, "
-            "`nearest_free`; a goal in unknown space names `allow_unknown`), or an unknown or conflicting controller",
+            "`nearest_free`; a goal in unknown space names `allow_unknown`), or an unknown or "
+            "conflicting controller",
         ),
         **UNAVAILABLE,
     },
