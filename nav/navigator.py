@@ -201,6 +201,7 @@ class Navigator:
         self._local: Costmap | None = None  # the local costmap of the last tick
         self._plan_reason = ""  # why the plan being waited for (or just computed) was asked for
         self.plans_kept = 0  # replans refused by the hysteresis (the current path was kept)
+        self._last_cmd = ZERO_TWIST  # the command of the last tick (the stall check's)
 
     @classmethod
     def for_robot(
@@ -368,6 +369,11 @@ class Navigator:
         if not self.progress_checker.check(pose, now):
             allowance = self.progress_checker.options.movement_time_allowance
             return self._stuck("NoProgress", f"moved less than the required radius in {allowance:g} s", None)
+        if self.state != NavState.FOLLOWING:
+            self.progress_checker.reset_stall()
+        elif self.progress_checker.stalled(self._last_cmd, velocity, now):
+            stall = self.progress_checker.options.stall_time_allowance
+            return self._stuck("Stalled", f"commanded to stand still while following for {stall:g} s", None)
 
         held = self._held
         if held is not None and now < held[0] + _control_period(self.controller) - 0.5 * self._tick_dt:
@@ -588,6 +594,7 @@ class Navigator:
         return d
 
     def _tick(self, cmd: Twist2D, outcome: NavOutcome | None = None) -> NavTick:
+        self._last_cmd = cmd
         remaining = self._remaining()
         speed = self.expected_speed
         q = self._q

@@ -5,7 +5,10 @@ a ``VirtualClock`` that the loop advances one control period at a time: determin
 limited only by the CPU. Prints ``{"reached", "time_s", "path_length_m", "recoveries", "collisions",
 "min_clearance_m", "localization_error_m", "controller", ...}`` (``--json``) or a one-line summary.
 ``--controller teb`` drives with TEB instead of DWA; ``--people N`` adds N random walkers
-(0.5-1.2 m/s, ``Crowd.populate``) that the robot must get round.
+(0.5-1.2 m/s, ``Crowd.populate``) that the robot must get round. ``--no-prior-map`` gives the robot
+an all-unknown map of the world's size (the simulator still runs the real world): the costmaps fill
+from the lidar, the planner crosses unknown space, goals in unknown space are accepted, and the pose
+comes from the simulator's truth (AMCL cannot localize in a blank map; SLAM is ``navdeck slam``'s).
 
 ``run_sim_nav`` is the library entry point used by the scenario suite (``bench/scenarios``).
 """
@@ -27,7 +30,7 @@ if TYPE_CHECKING:
     from app.features.localization import Localization
     from app.features.navigation import Navigation
     from app.session import Session
-    from nav.types import OccupancyGrid, Pose2D
+    from nav.types import GridGeometry, OccupancyGrid, Pose2D
     from robot.sim import SimDriver, World
 
 
@@ -45,8 +48,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "sim-nav", help="simulate navigating to a goal (AMCL + costmaps + planner + DWA) on a virtual clock"
     )
-    p.add_argument("--map", required=True, help="map YAML the robot localizes and plans in")
+    p.add_argument("--map", help="map YAML the robot localizes and plans in (required unless --no-prior-map)")
     p.add_argument("--world", help="world YAML the simulator runs (default: the map)")
+    p.add_argument(
+        "--no-prior-map",
+        action="store_true",
+        help="plan from an all-unknown map of the world's size (localization from the truth)",
+    )
     p.add_argument("--profile", default="skid4", help="robot profile name or TOML path (default skid4)")
     p.add_argument("--start", required=True, type=_pose_arg, help="start x,y,theta in the map frame")
     p.add_argument(
@@ -57,7 +65,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     )
     p.add_argument("--people", type=int, default=0, help="random walkers (0.5-1.2 m/s) in the world")
     p.add_argument("--planner", choices=["astar", "dijkstra"], default="astar")
-    p.add_argument("--localization", choices=["amcl", "truth"], default="amcl")
+    p.add_argument(
+        "--localization",
+        choices=["amcl", "truth"],
+        default=None,
+        help="default amcl (truth without a prior map)",
+    )
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--timeout", type=float, default=120.0, help="simulated seconds before giving up")
     p.add_argument("--json", action="store_true", help="print one JSON object")
@@ -84,6 +97,9 @@ class SimNavConfig:
     """Local controller, "dwa" | "teb"; None: the profile's."""
     people: int = 0
     """Random walkers added to the simulated world (away from the start)."""
+    no_prior_map: bool = False
+    """Give the robot an all-unknown map of the world's size instead of ``map_path`` (which then
+    only names the world when ``world_path`` is None); needs ``localization="truth"``."""
 
 
 @dataclass
@@ -159,6 +175,15 @@ def build_sim_stack(
     return SimStack(session, driver, world, loc, nav)
 
 
+def unknown_grid(geometry: GridGeometry) -> OccupancyGrid:
+    """An all-unknown (-1) map over ``geometry``: what a robot knows before it has seen anything."""
+    import numpy as np
+
+    from nav.types import OccupancyGrid
+
+    return OccupancyGrid(geometry, np.full((geometry.height, geometry.width), -1, dtype=np.int8))
+
+
 def _outline(polygon, spacing: float = 0.02):
     import numpy as np
 
@@ -177,16 +202,19 @@ def drive(
     goals: Sequence[Pose2D],
     timeout: float,
     on_step: Callable[[SimStack, float], None] | None = None,
+    *,
+    allow_unknown: bool | None = None,
 ) -> SimNavResult:
     """Send ``goals`` and step the loop until the navigation outcome or ``timeout`` simulated s;
-    ``on_step(stack, elapsed)`` runs after every step (a scenario's events and its own figures)."""
+    ``on_step(stack, elapsed)`` runs after every step (a scenario's events and its own figures);
+    ``allow_unknown`` accepts goals in unknown space (the request field)."""
     import numpy as np
 
     s, nav, world = stack.session, stack.navigation, stack.world
     geo = world.geometry
     clear = world.clearance_map
     outline = _outline(stack.driver.profile.footprint_polygon())
-    nav.set_goals(list(goals))
+    nav.set_goals(list(goals), allow_unknown=allow_unknown)
     t0, wall0 = s.clock.now(), time.perf_counter()
     min_clear, errs = math.inf, []
     last = stack.driver.truth_pose
@@ -245,8 +273,10 @@ def run_sim_nav(cfg: SimNavConfig) -> SimNavResult:
     from nav.types import Pose2D
     from robot.sim import World
 
-    grid = load_map_yaml(cfg.map_path)
+    if cfg.no_prior_map and cfg.localization != "truth":
+        raise ValueError("without a prior map the pose comes from the truth: localization must be 'truth'")
     world = World.from_yaml(cfg.world_path or cfg.map_path)
+    grid = unknown_grid(world.geometry) if cfg.no_prior_map else load_map_yaml(cfg.map_path)
     for poly in cfg.obstacles:
         world.add_polygon(list(poly))
     start = Pose2D(*cfg.start)
@@ -268,7 +298,8 @@ def run_sim_nav(cfg: SimNavConfig) -> SimNavResult:
     )
     try:
         stack.localization.set_initial_pose(start)
-        return drive(stack, [Pose2D(*g) for g in cfg.goals], cfg.timeout)
+        goals = [Pose2D(*g) for g in cfg.goals]
+        return drive(stack, goals, cfg.timeout, allow_unknown=True if cfg.no_prior_map else None)
     finally:
         stack.session.close()
 
@@ -280,10 +311,16 @@ def run(args: argparse.Namespace) -> int:
     from robot.profiles import ProfileError
     from robot.sim.people import PeopleError
 
-    map_path = Path(args.map)
+    if args.map is None and not (args.no_prior_map and args.world):
+        raise CliError("--map is required (or --no-prior-map with --world)")
+    world_path = Path(args.world) if args.world else None
+    map_path = Path(args.map) if args.map else world_path
+    assert map_path is not None
     if not map_path.is_file():
         raise CliError(f"map file not found: {map_path}")
-    world_path = Path(args.world) if args.world else None
+    localization = args.localization or ("truth" if args.no_prior_map else "amcl")
+    if args.no_prior_map and localization != "truth":
+        raise CliError("--no-prior-map needs --localization truth (AMCL cannot localize in a blank map)")
     if world_path is not None and not world_path.is_file():
         raise CliError(f"world file not found: {world_path}")
     if not math.isfinite(args.timeout) or args.timeout <= 0:
@@ -297,11 +334,12 @@ def run(args: argparse.Namespace) -> int:
         start=args.start,
         goals=tuple(args.goal),
         planner=args.planner,
-        localization=args.localization,
+        localization=localization,
         seed=args.seed,
         timeout=args.timeout,
         controller=args.controller,
         people=args.people,
+        no_prior_map=args.no_prior_map,
     )
     try:
         result = run_sim_nav(cfg)

@@ -106,11 +106,18 @@ class Missions:
         navigation.add_listener(self._on_navigation)
 
     # ---------------------------------------------------------------- requests
-    def create(self, goals: list[Pose2D], controller: str | None = None, actor: str = "operator") -> Mission:
+    def create(
+        self,
+        goals: list[Pose2D],
+        controller: str | None = None,
+        actor: str = "operator",
+        allow_unknown: bool | None = None,
+    ) -> Mission:
         """Start a mission (raises the navigation's GoalRejected / NavigationRefused). It supersedes
-        the running one, whose cancel then says ``superseded`` with this ``actor``."""
+        the running one, whose cancel then says ``superseded`` with this ``actor``. ``allow_unknown``
+        accepts goals in unknown space (None: the navigation option ``allow_unknown_goals``)."""
         with self._lock:  # held across set_goals: the loop's "started" cannot overtake the registration
-            rid = self.nav.set_goals(goals, controller, actor=actor)
+            rid = self.nav.set_goals(goals, controller, actor=actor, allow_unknown=allow_unknown)
             return self._register(rid, goals, controller, actor)
 
     def _register(self, rid: int, goals: list[Pose2D], controller: str | None, actor: str) -> Mission:

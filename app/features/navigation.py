@@ -145,6 +145,7 @@ class RecoveryPolicy(Protocol):
 
 _TRIGGERS = {
     "NoProgress": "no_progress",
+    "Stalled": "no_progress",
     "PatienceExceeded": "controller_failure",
     "NoValidControl": "controller_failure",
     "LocalizationDiverged": "localization_divergence",
@@ -230,6 +231,23 @@ class NavigationOptions:
     local_static_layer: bool = True
     """Include the map in the local costmap too (Nav2's default local costmap has no static layer;
     with it the controller keeps off walls the lidar cannot see, e.g. below ``range_min``)."""
+    track_unknown_space: bool = True
+    """Global costmap keeps unknown cells 255 (Nav2 name and global default); see docs/navigation.md."""
+    local_track_unknown_space: bool = True
+    """Local costmap keeps cells the lidar has not observed 255 and both controllers treat them as
+    lethal: the robot never drives (nor reverses) into space not seen unless the map says it is free.
+    Nav2's local default is false."""
+    observation_max_age: float = 10.0
+    """Seconds after which a free local-costmap cell not observed again returns to unknown."""
+    allow_unknown: bool = True
+    """The planner may cross unknown cells (Nav2 NavFn/Smac ``allow_unknown``)."""
+    unknown_cost: int = 255
+    """The planner's cost (0..255) of an unknown cell (``PlannerOptions.unknown_cost``)."""
+    allow_unknown_goals: bool = False
+    """Accept goals in unknown space; a request's ``allow_unknown`` overrides it for itself."""
+    gap_margin: float = 0.05
+    """Metres beyond the inscribed radius a path keeps from obstacles: gaps narrower than twice
+    (inscribed radius + margin) are not planned through (``PlannerOptions.max_cost``)."""
     global_update_period: float = 1.0
     """Seconds between obstacle-layer updates of the global costmap (Nav2 ``update_frequency`` 1 Hz)."""
     goal_search_radius: float = 3.0
@@ -284,7 +302,7 @@ class Navigation:
         self.localization = localization
         self.options = o = options or NavigationOptions()
         self.profile = session.profile
-        self.planner = make_planner(o.planner)
+        self.planner = make_planner(o.planner, self._planner_options())
         self.navigator = Navigator.for_robot(
             self.profile,
             None,
@@ -293,8 +311,8 @@ class Navigation:
             goal_checker=GoalChecker(),
             progress_checker=ProgressChecker(),
             controller=o.controller,
-            teb_overrides=o.teb_overrides,
-            **o.dwa_overrides,
+            teb_overrides=self._controller_overrides("teb"),
+            **self._controller_overrides("dwa"),
         )
         self.default_controller = self.navigator.controller_name
         virtual = bool(getattr(session.clock, "is_virtual", False))
@@ -352,13 +370,37 @@ class Navigation:
                 self._costmap_options(False),
                 self._costmap_options(True),
                 grid.resolution if grid is not None else 0.05,
-                {"dwa": o.dwa_overrides, "teb": o.teb_overrides},
+                {"dwa": self._controller_overrides("dwa"), "teb": self._controller_overrides("teb")},
             )
         except Exception:  # a failed warm-up costs only time: the first goal compiles instead
             log.exception("navigation warm-up failed")
             return {}
         log.info("navigation kernels ready: %s", ", ".join(f"{k} {v:.1f} s" for k, v in timings.items()))
         return timings
+
+    def _controller_overrides(self, name: str) -> dict[str, Any]:
+        """The options' overrides of one controller, with unknown cells lethal when the local
+        costmap tracks unknown space (an explicit ``unknown_is_lethal`` override wins)."""
+        o = self.options
+        given = o.dwa_overrides if name == "dwa" else o.teb_overrides
+        return {"unknown_is_lethal": o.local_track_unknown_space, **given}
+
+    def _planner_options(self):
+        from nav.costmap import InflationOptions, inflation_cost
+        from nav.planning import PlannerOptions
+
+        o = self.options
+        infl = InflationOptions(o.inflation_radius, o.cost_scaling_factor)
+        inscribed = self.profile.inscribed_radius
+        grid = self.localization.grid
+        half_cell = 0.5 * (grid.resolution if grid is not None else 0.05)
+        limit = 252  # Nav2's rule: anything below the inscribed cost
+        if o.gap_margin > 0:
+            # Inflation measures from obstacle cell centres, half a cell behind the obstacle's edge:
+            # a centre nearer than inscribed + margin to that edge costs more than this, blocked.
+            clearance = inscribed + o.gap_margin + half_cell
+            limit = min(limit, int(inflation_cost(clearance, inscribed, infl)))
+        return PlannerOptions(allow_unknown=o.allow_unknown, unknown_cost=o.unknown_cost, max_cost=limit)
 
     def _costmap_options(self, rolling: bool):
         from nav.costmap import CostmapOptions, InflationOptions, local_costmap_options
@@ -377,8 +419,15 @@ class Navigation:
                 robot_radius=radius,
                 use_static_layer=self.options.local_static_layer,
                 inflation_layer=infl,
+                track_unknown_space=self.options.local_track_unknown_space,
+                observation_max_age=self.options.observation_max_age,
             )
-        return CostmapOptions(footprint=fp, robot_radius=radius, inflation_layer=infl)
+        return CostmapOptions(
+            footprint=fp,
+            robot_radius=radius,
+            inflation_layer=infl,
+            track_unknown_space=self.options.track_unknown_space,
+        )
 
     def _build_costmaps(self, grid: OccupancyGrid | None) -> None:
         from nav.costmap import Costmap2D
@@ -408,9 +457,10 @@ class Navigation:
         return self._local_cm
 
     # ------------------------------------------------------------------ requests (any thread)
-    def check_goal(self, goal: Pose2D, index: int = 0) -> None:
+    def check_goal(self, goal: Pose2D, index: int = 0, allow_unknown: bool | None = None) -> None:
         """Raise ``GoalRejected`` for a goal off the map, in an obstacle, inside the inscribed radius
-        of one, or in unknown space; the error carries the nearest traversable pose."""
+        of one, or in unknown space (unless ``allow_unknown``, default the option
+        ``allow_unknown_goals``); the error carries the nearest traversable pose."""
         from nav.planning import nearest_free_pose
 
         cm = self._global_cm
@@ -434,8 +484,13 @@ class Navigation:
         reason = {
             LETHAL_OBSTACLE: "inside an obstacle",
             INSCRIBED_INFLATED_OBSTACLE: "inside the inscribed radius of an obstacle",
-            NO_INFORMATION: "in unknown space",
+            NO_INFORMATION: "in unknown space (allow_unknown is off: send allow_unknown: true with the "
+            "goal or set allow_unknown_goals)",
         }.get(cost)
+        if cost == NO_INFORMATION and (
+            self.options.allow_unknown_goals if allow_unknown is None else allow_unknown
+        ):
+            return
         if reason is not None:
             raise GoalRejected(reason, goal, nearest_free_pose(cm, goal, r), index)
 
@@ -451,16 +506,29 @@ class Navigation:
                 log.exception("navigation listener failed")
 
     def set_goals(
-        self, goals: Sequence[Pose2D], controller: str | None = None, *, actor: str = "operator"
+        self,
+        goals: Sequence[Pose2D],
+        controller: str | None = None,
+        *,
+        actor: str = "operator",
+        allow_unknown: bool | None = None,
     ) -> int:
         """Validate ``goals`` (raises GoalRejected / NavigationRefused) and start navigating through
         them in order; replaces (supersedes) the current request. ``controller`` ("dwa" | "teb")
         drives this request only; None: the default one (``NavigationOptions.controller`` or the
         profile's). ``actor`` names who asked (the cause of the superseded request's end). Returns
-        the new request's id."""
-        return self._submit(list(goals), controller, actor, extends=None)
+        the new request's id. ``allow_unknown`` accepts goals in unknown space for this request
+        (None: the option ``allow_unknown_goals``)."""
+        return self._submit(list(goals), controller, actor, extends=None, allow_unknown=allow_unknown)
 
-    def _submit(self, goals: list[Pose2D], controller: str | None, actor: str, extends: int | None) -> int:
+    def _submit(
+        self,
+        goals: list[Pose2D],
+        controller: str | None,
+        actor: str,
+        extends: int | None,
+        allow_unknown: bool | None = None,
+    ) -> int:
         from nav.navigator import check_controller_name
 
         if not goals:
@@ -475,7 +543,7 @@ class Navigation:
         if why:
             raise NavigationRefused(why, mode.value, self.session.modes.allowed())
         for i, g in enumerate(goals):
-            self.check_goal(g, i)
+            self.check_goal(g, i, allow_unknown)
         try:  # mode first: the loop never sees goals without the mode that drives them
             self.session.modes.request(Mode.NAVIGATING, "navigation goal")
         except TransitionRefused as exc:
@@ -785,7 +853,7 @@ class Navigation:
             # The window follows the robot at scan rate (>= 5 Hz: a few cm of travel); moving it
             # without new data would only re-inflate the same cells every tick.
             return
-        self._local.update_from_scan(pose, frame.scan, lp)
+        self._local.update_from_scan(pose, frame.scan, lp, stamp=now)
         self._local_cm = self._local.costmap()
         if now - self._last_global_update >= self.options.global_update_period:
             self._last_global_update = now

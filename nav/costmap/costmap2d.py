@@ -60,6 +60,10 @@ class CostmapOptions:
     track_unknown_space: bool = True
     """Keep unknown cells as NO_INFORMATION (255) instead of free. Nav2's global costmap sets true,
     its local costmap leaves the default false."""
+    observation_max_age: float = math.inf
+    """With ``track_unknown_space``: a free obstacle-layer cell not observed again for this long
+    (s, on the clock of ``update``'s ``stamp``) returns to unknown, so a controller that treats
+    unknown as lethal only drives where the sensors looked recently (navdeck, issue 18; inf: never)."""
     robot_radius: float = 0.1
     """Radius (m) of a circular robot, used when ``footprint`` is empty. Nav2 default 0.1."""
     footprint: tuple[tuple[float, float], ...] = ()
@@ -92,7 +96,8 @@ class CostmapOptions:
 
 
 def local_costmap_options(**overrides: object) -> CostmapOptions:
-    """Nav2's local costmap defaults: 3 x 3 m rolling window, no static layer, unknown as free."""
+    """Nav2's local costmap defaults: 3 x 3 m rolling window, no static layer, unknown as free
+    (``track_unknown_space=True`` in ``overrides`` keeps unseen cells unknown)."""
     base: dict[str, object] = {
         "rolling_window": True,
         "use_static_layer": False,
@@ -135,7 +140,12 @@ class Costmap2D:
             )
             self._static_geometry = static_map.geometry
         self._obstacles = (
-            ObstacleLayer(geometry, o.obstacle_layer, track_unknown_space=o.track_unknown_space)
+            ObstacleLayer(
+                geometry,
+                o.obstacle_layer,
+                track_unknown_space=o.track_unknown_space,
+                keep_stamps=o.track_unknown_space and math.isfinite(o.observation_max_age),
+            )
             if o.use_obstacle_layer
             else None
         )
@@ -197,18 +207,24 @@ class Costmap2D:
         sensor_origin: np.ndarray | tuple[float, float] | None = None,
         *,
         no_return_points_world: np.ndarray | None = None,
+        stamp: float | None = None,
     ) -> None:
         """One cycle: move the window (rolling), clear and mark the scan, then clear the footprint.
 
         ``scan_points_world``: (N, 2) lidar returns in the costmap's frame; ``sensor_origin``: the
         laser position (default the robot position); ``no_return_points_world``: optional far ends
-        of beams without a return, used only for clearing.
+        of beams without a return, used only for clearing; ``stamp``: the scan's time (s), which
+        ages observations when ``observation_max_age`` is finite.
         """
         o = self.options
         if o.rolling_window:
             self._move_window(robot_pose)
         if self._obstacles is None:
             return
+        if stamp is not None:
+            self._obstacles.now = stamp
+            if math.isfinite(o.observation_max_age):
+                self._dirty = _union(self._dirty, self._obstacles.expire(o.observation_max_age))
         if scan_points_world is not None or no_return_points_world is not None:
             origin = (
                 np.array([robot_pose.x, robot_pose.y]) if sensor_origin is None else np.asarray(sensor_origin)
@@ -222,7 +238,11 @@ class Costmap2D:
             self._dirty = _union(self._dirty, self._obstacles.clear_cells(rows, cols))
 
     def update_from_scan(
-        self, robot_pose: Pose2D, scan: LaserScan, laser_offset: Pose2D | None = None
+        self,
+        robot_pose: Pose2D,
+        scan: LaserScan,
+        laser_offset: Pose2D | None = None,
+        stamp: float | None = None,
     ) -> None:
         """``update`` from a ``LaserScan``: valid returns mark and clear; beams with no return
         (``+inf``, REP-117) clear up to ``raytrace_max_range`` without marking, like Nav2 with
@@ -241,6 +261,7 @@ class Costmap2D:
             laser.transform_points(hits),
             np.array([laser.x, laser.y]),
             no_return_points_world=laser.transform_points(far) if far.shape[0] else None,
+            stamp=stamp,
         )
 
     def _move_window(self, robot_pose: Pose2D) -> None:

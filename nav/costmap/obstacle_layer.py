@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from nav.costmap.raytrace import _clear, clear_segments
+from nav.costmap.raytrace import NO_STAMP, _clear, clear_segments
 from nav.types import FREE_SPACE, LETHAL_OBSTACLE, NO_INFORMATION, GridGeometry
 
 Bounds = tuple[int, int, int, int]
@@ -109,6 +109,8 @@ def _apply_scan(
     grid: np.ndarray,
     clearing: bool,
     marking: bool,
+    stamp: np.ndarray,
+    now: float,
 ) -> np.ndarray:
     """``ObstacleLayer.update`` on an axis-aligned grid: clear every beam (``_clear``), then mark
     the finite returns within the obstacle range. ``ranges``: raytrace min/max, obstacle min/max;
@@ -119,7 +121,9 @@ def _apply_scan(
     if clearing:
         seg, clipped, no_return = _beam_segments(pts, far_pts, x0, y0, ranges, grid)
         if seg.shape[0]:
-            bounds = _clear(costs, seg, np.uint8(FREE_SPACE), clipped, no_return, np.uint8(LETHAL_OBSTACLE))
+            bounds = _clear(
+                costs, seg, np.uint8(FREE_SPACE), clipped, no_return, np.uint8(LETHAL_OBSTACLE), stamp, now
+            )
     if marking:
         ox, oy, res = grid[0], grid[1], grid[2]
         for i in range(pts.shape[0]):
@@ -133,28 +137,49 @@ def _apply_scan(
             r = math.floor((y - oy) / res)
             if 0 <= r < h and 0 <= c < w:
                 costs[r, c] = LETHAL_OBSTACLE
+                if stamp.shape[0]:
+                    stamp[r, c] = now
                 bounds[0], bounds[1] = min(bounds[0], r), max(bounds[1], r)
                 bounds[2], bounds[3] = min(bounds[2], c), max(bounds[3], c)
     return bounds
 
 
 class ObstacleLayer:
-    """Per-cell obstacle state over a grid: LETHAL, FREE, or NO_INFORMATION when tracking unknown."""
+    """Per-cell obstacle state over a grid: LETHAL, FREE, or NO_INFORMATION when tracking unknown.
+
+    With ``keep_stamps`` each cell also remembers when a beam (or the footprint) last observed it
+    (``seen``, -inf never), so ``expire`` can return free cells not observed for a while to unknown:
+    space seen long ago may no longer be free (issue 18, "never drive into space not seen")."""
 
     def __init__(
         self,
         geometry: GridGeometry,
         options: ObstacleLayerOptions | None = None,
         track_unknown_space: bool = False,
+        keep_stamps: bool = False,
     ) -> None:
         self.geometry = geometry
         self.options = options or ObstacleLayerOptions()
         self.default_value = NO_INFORMATION if track_unknown_space else FREE_SPACE
         self.costs = np.full((geometry.height, geometry.width), self.default_value, dtype=np.uint8)
+        self.seen = np.full(self.costs.shape, -np.inf) if keep_stamps else NO_STAMP
+        self.now = 0.0
+        """Time stamped on the cells the next updates observe (``Costmap2D.update``'s ``stamp``)."""
 
     def reset(self) -> None:
         """Forget every observation (Nav2 ``ObstacleLayer::reset``; the clear-costmap behaviour)."""
         self.costs.fill(self.default_value)
+        self.seen.fill(-np.inf)
+
+    def expire(self, max_age: float) -> Bounds | None:
+        """Return FREE cells last observed more than ``max_age`` s before ``now`` to the default
+        value (unknown when tracking it); vectorized over the grid. Returns the changed bounds."""
+        if not self.seen.shape[0] or self.default_value == FREE_SPACE:
+            return None
+        stale = (self.seen < self.now - max_age) & (self.costs == FREE_SPACE)
+        rows, cols = np.nonzero(stale)
+        self.costs[rows, cols] = self.default_value
+        return _bounds_of(rows, cols)
 
     def set_geometry(self, geometry: GridGeometry) -> None:
         """Move the grid to a new origin (same resolution and size), keeping the overlapping cells,
@@ -164,20 +189,28 @@ class ObstacleLayer:
         dc = round((geometry.origin.x - old.origin.x) / res)
         dr = round((geometry.origin.y - old.origin.y) / res)
         h, w = self.costs.shape
-        new = np.full((h, w), self.default_value, dtype=np.uint8)
         src_r0, src_c0 = max(dr, 0), max(dc, 0)
         dst_r0, dst_c0 = max(-dr, 0), max(-dc, 0)
         nr, nc = h - abs(dr), w - abs(dc)
-        if nr > 0 and nc > 0:
-            new[dst_r0 : dst_r0 + nr, dst_c0 : dst_c0 + nc] = self.costs[
-                src_r0 : src_r0 + nr, src_c0 : src_c0 + nc
-            ]
-        self.costs = new
+
+        def shifted(old_grid: np.ndarray, fill: float) -> np.ndarray:
+            new = np.full(old_grid.shape, fill, dtype=old_grid.dtype)
+            if nr > 0 and nc > 0:
+                new[dst_r0 : dst_r0 + nr, dst_c0 : dst_c0 + nc] = old_grid[
+                    src_r0 : src_r0 + nr, src_c0 : src_c0 + nc
+                ]
+            return new
+
+        self.costs = shifted(self.costs, self.default_value)
+        if self.seen.shape[0]:
+            self.seen = shifted(self.seen, -np.inf)
         self.geometry = geometry
 
     def clear_cells(self, rows: np.ndarray, cols: np.ndarray) -> Bounds | None:
-        """Set cells to FREE (footprint clearing)."""
+        """Set cells to FREE (footprint clearing); they count as observed now."""
         self.costs[rows, cols] = FREE_SPACE
+        if self.seen.shape[0]:
+            self.seen[rows, cols] = self.now
         return _bounds_of(rows, cols)
 
     def update(
@@ -204,6 +237,8 @@ class ObstacleLayer:
             np.array([geo.origin.x, geo.origin.y, geo.resolution]),
             o.clearing,
             o.marking,
+            self.seen,
+            float(self.now),
         )
         return None if b[1] < 0 else (int(b[0]), int(b[1]) + 1, int(b[2]), int(b[3]) + 1)
 
@@ -237,7 +272,16 @@ class ObstacleLayer:
                     bounds = _union(
                         bounds,
                         clear_segments(
-                            self.costs, geo, near, far, FREE_SPACE, clipped, LETHAL_OBSTACLE, no_return
+                            self.costs,
+                            geo,
+                            near,
+                            far,
+                            FREE_SPACE,
+                            clipped,
+                            LETHAL_OBSTACLE,
+                            no_return,
+                            stamp=self.seen if self.seen.shape[0] else None,
+                            now=self.now,
                         ),
                     )
         if o.marking and pts.shape[0]:
@@ -248,5 +292,7 @@ class ObstacleLayer:
             inside = geo.in_bounds(rows, cols)
             rows, cols = rows[inside], cols[inside]
             self.costs[rows, cols] = LETHAL_OBSTACLE
+            if self.seen.shape[0]:
+                self.seen[rows, cols] = self.now
             bounds = _union(bounds, _bounds_of(rows, cols))
         return bounds

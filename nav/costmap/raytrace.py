@@ -17,6 +17,9 @@ from numba import njit
 
 from nav.types import GridGeometry
 
+NO_STAMP = np.empty((0, 0))
+"""The ``stamp`` argument of ``_clear`` when observation times are not kept."""
+
 
 @njit(cache=True, nogil=True)
 def _clip(x0: float, y0: float, dx: float, dy: float, w: float, h: float) -> tuple[float, float]:
@@ -44,9 +47,12 @@ def _clear(
     include_end: np.ndarray,
     stop: np.ndarray,
     stop_value: np.uint8,
+    stamp: np.ndarray,
+    now: float,
 ) -> np.ndarray:
     """Walk and write every segment; a segment flagged in ``stop`` ends at the first cell holding
-    ``stop_value`` (written too: it clears that surface but nothing behind it)."""
+    ``stop_value`` (written too: it clears that surface but nothing behind it). Every written cell
+    gets ``now`` in ``stamp`` (when it last was observed) unless ``stamp`` is empty."""
     h, w = costs.shape
     bounds = np.array([h, -1, w, -1], dtype=np.int64)  # row0, row1 (inclusive here), col0, col1
     for i in range(seg.shape[0]):
@@ -71,6 +77,8 @@ def _clear(
             if include_end[i] or c != end_c or r != end_r:
                 was = costs[r, c]
                 costs[r, c] = value
+                if stamp.shape[0]:
+                    stamp[r, c] = now
                 bounds[0] = min(bounds[0], r)
                 bounds[1] = max(bounds[1], r)
                 bounds[2] = min(bounds[2], c)
@@ -101,12 +109,15 @@ def clear_segments(
     include_end: bool | np.ndarray = False,
     stop_at: int | None = None,
     stop: bool | np.ndarray = True,
+    stamp: np.ndarray | None = None,
+    now: float = 0.0,
 ) -> tuple[int, int, int, int] | None:
     """Set every cell of ``costs`` (over ``geometry``) whose interior a world segment
     ``starts[i] -> ends[i]`` crosses to ``value``, except the cell holding the segment's end unless
     ``include_end`` (it holds the return; a bool, or one per segment). With ``stop_at``, the
     segments flagged in ``stop`` (a bool, or one per segment) end at the first cell holding that
-    value, which is written but nothing behind it. Returns the written region (row0, row1, col0,
+    value, which is written but nothing behind it. ``stamp`` (same shape as ``costs``) gets ``now``
+    in every written cell. Returns the written region (row0, row1, col0,
     col1), half-open, or None when nothing was written."""
     starts = np.asarray(starts, dtype=np.float64).reshape(-1, 2)
     ends = np.asarray(ends, dtype=np.float64).reshape(-1, 2)
@@ -122,10 +133,20 @@ def clear_segments(
     n = seg.shape[0]
     flags = np.array(np.broadcast_to(np.asarray(include_end, dtype=np.bool_), (n,)))
     stops = np.array(np.broadcast_to(np.asarray(stop_at is not None and stop, dtype=np.bool_), (n,)))
-    b = _clear(costs, seg, np.uint8(value), flags, stops, np.uint8(0 if stop_at is None else stop_at))
+    stamps = NO_STAMP if stamp is None else stamp
+    b = _clear(
+        costs,
+        seg,
+        np.uint8(value),
+        flags,
+        stops,
+        np.uint8(0 if stop_at is None else stop_at),
+        stamps,
+        float(now),
+    )
     if b[1] < 0:
         return None
     return int(b[0]), int(b[1]) + 1, int(b[2]), int(b[3]) + 1
 
 
-__all__ = ["clear_segments"]
+__all__ = ["NO_STAMP", "clear_segments"]

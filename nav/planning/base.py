@@ -44,6 +44,13 @@ class PlannerOptions:
     within this distance of it. Smac 2D default 0.125, NavFn 0.5; 0.25 = 5 cells at 0.05 m."""
     allow_unknown: bool = True
     """Whether unknown (255) cells are traversable. Nav2 default true."""
+    unknown_cost: int = NO_INFORMATION
+    """Cost (0..255) an unknown cell counts with in the step cost when ``allow_unknown``: 255 keeps
+    the raw value (as Smac does), 0 treats unknown as free space (navdeck, issue 18)."""
+    max_cost: int = INSCRIBED_INFLATED_OBSTACLE - 1
+    """Highest known cost a path may enter (0..252): 252 is Nav2's rule (below inscribed); lower
+    values keep paths out of gaps the footprint cannot pass with a margin (navdeck, issue 18; the
+    navigation feature derives it from ``gap_margin``)."""
     cost_travel_multiplier: float = 2.0
     """Step cost = (1 or sqrt2) * (1 + cost_travel_multiplier * cost / 252): 0 is shortest-distance
     geometry, larger values keep the path in the middle of free space. Smac 2D default 2.0
@@ -61,6 +68,12 @@ class PlannerOptions:
     smoother: SmootherOptions = field(default_factory=SmootherOptions)
     """Smoother parameters (Nav2 ``SimpleSmoother`` names)."""
 
+    def __post_init__(self) -> None:
+        if not 0 <= self.unknown_cost <= NO_INFORMATION:
+            raise ValueError(f"unknown_cost must be 0..255, got {self.unknown_cost}")
+        if not 0 <= self.max_cost <= INSCRIBED_INFLATED_OBSTACLE - 1:
+            raise ValueError(f"max_cost must be 0..252, got {self.max_cost}")
+
 
 @dataclass(frozen=True)
 class PlanStats:
@@ -75,9 +88,12 @@ class PlanStats:
     time_s: float
 
 
-def traversable_mask(costs: np.ndarray, allow_unknown: bool) -> np.ndarray:
-    """Cells a path may enter: below the inscribed cost, plus unknown ones if allowed."""
-    ok = costs < INSCRIBED_INFLATED_OBSTACLE
+def traversable_mask(
+    costs: np.ndarray, allow_unknown: bool, max_cost: int = INSCRIBED_INFLATED_OBSTACLE - 1
+) -> np.ndarray:
+    """Cells a path may enter: cost <= ``max_cost`` (below inscribed by default), plus unknown ones
+    if allowed."""
+    ok = costs <= min(max_cost, INSCRIBED_INFLATED_OBSTACLE - 1)
     if allow_unknown:
         ok |= costs == NO_INFORMATION
     return ok
@@ -137,7 +153,9 @@ class GridPlanner:
             raise GoalOutsideMap(f"goal ({goal.x:.2f}, {goal.y:.2f}) is outside the costmap")
         if costs[sr, sc] == LETHAL_OBSTACLE:
             raise StartOccupied(f"start ({start.x:.2f}, {start.y:.2f}) is in a lethal obstacle")
-        passable = traversable_mask(costs, opts.allow_unknown)
+        passable = traversable_mask(costs, opts.allow_unknown, opts.max_cost)
+        if opts.allow_unknown and opts.unknown_cost != NO_INFORMATION:
+            costs = np.where(costs == NO_INFORMATION, np.uint8(opts.unknown_cost), costs)
         tol_cells = max(opts.tolerance, 0.0) / geo.resolution
         target = (gr, gc)
         if not passable[gr, gc] and (sr, sc) != (gr, gc):
@@ -195,7 +213,8 @@ class GridPlanner:
         if opts.smooth_path and cells_xy.shape[0] > 2:
             smoothed = smooth_cells(cells_xy, costs, opts.smoother)
             world_s = geo.origin.transform_points(smoothed * geo.resolution)
-            if path_is_traversable(costmap, world_s[1:-1], max_cost=INSCRIBED_INFLATED_OBSTACLE - 1):
+            limit = min(opts.max_cost, INSCRIBED_INFLATED_OBSTACLE - 1)
+            if path_is_traversable(costmap, world_s[1:-1], max_cost=limit):
                 cells_xy = smoothed
         world = geo.origin.transform_points(cells_xy * geo.resolution)
         if world.shape[0] == 1:

@@ -47,6 +47,9 @@ class MissionIn(StrictModel):
     controller: Literal["dwa", "teb"] | None = Field(
         None, description="local controller for this mission; default: the robot profile's"
     )
+    allow_unknown: bool | None = Field(
+        None, description="accept goals in unknown space; default: the navigation option allow_unknown_goals"
+    )
 
 
 class PoseOut(BaseModel):
@@ -158,12 +161,18 @@ def goal_problem(exc: GoalRejected | NavigationRefused) -> ProblemError:
     return ProblemError(409, detail, kind="navigation-refused", **body)
 
 
-def start_mission(missions: Missions, goals: list[Pose2D], controller: str | None, actor: str) -> Mission:
+def start_mission(
+    missions: Missions,
+    goals: list[Pose2D],
+    controller: str | None,
+    actor: str,
+    allow_unknown: bool | None = None,
+) -> Mission:
     """Create a mission; raises ProblemError (409 / 422) when it cannot start."""
     if not goals:
         raise ProblemError(422, "goals: give at least one goal", kind="invalid-request")
     try:
-        return missions.create(goals, controller, actor)
+        return missions.create(goals, controller, actor, allow_unknown)
     except (GoalRejected, NavigationRefused) as exc:
         raise goal_problem(exc) from None
     except ValueError as exc:  # an unknown controller name
@@ -197,7 +206,7 @@ def find(missions: Missions, mission_id: str) -> Mission:
 )
 def create_mission(body: MissionIn, missions: MissionsDep, actor: ActorDep, response: Response) -> MissionOut:
     goals = [Pose2D(g.x, g.y, g.theta) for g in [*body.goals, *body.waypoints]]
-    m = start_mission(missions, goals, body.controller, actor)
+    m = start_mission(missions, goals, body.controller, actor, body.allow_unknown)
     response.headers["Location"] = f"/api/missions/{m.id}"
     return mission_out(missions, m)
 

@@ -31,6 +31,9 @@ class GoalIn(StrictModel):
     y: float
     theta: float = 0.0
     controller: Literal["dwa", "teb"] | None = None
+    allow_unknown: bool | None = None
+    """Accept a goal in unknown space (None: the navigation option ``allow_unknown_goals``); in a
+    list, any goal that sets it sets it for the whole request."""
 
 
 def get_navigation_feature(rt: RuntimeDep) -> Navigation:
@@ -86,7 +89,8 @@ def get_navigation(nav: NavigationDep) -> NavigationOut:
             s409="not localized, e-stop, fault, the mode does not allow navigating, or another client "
             "holds control",
             s422="goal off the map, in an obstacle or its inscribed radius (`reason`, `index`, "
-            "`nearest_free`), or an unknown or conflicting controller",
+            "`nearest_free`; a goal in unknown space names `allow_unknown`), or an unknown or "
+            "conflicting controller",
         ),
         **UNAVAILABLE,
     },
@@ -102,8 +106,14 @@ def post_goals(
             f"controller: one request drives with one controller, got {sorted(named)}",
             kind="invalid-request",
         )
+    flags = {g.allow_unknown for g in goals if g.allow_unknown is not None}
+    allow_unknown = None if not flags else any(flags)
     m = start_mission(
-        missions, [Pose2D(g.x, g.y, g.theta) for g in goals], named.pop() if named else None, actor
+        missions,
+        [Pose2D(g.x, g.y, g.theta) for g in goals],
+        named.pop() if named else None,
+        actor,
+        allow_unknown,
     )
     # the new state (the loop picks the request up on its next tick), and the mission to wait on
     return GoalsOut.model_validate(
