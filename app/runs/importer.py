@@ -72,6 +72,7 @@ class ImportJob:
     error: str = ""
     started: float = field(default_factory=time.monotonic)
     elapsed_s: float = 0.0
+    cpu_s: float = 0.0  # the worker thread's CPU time (benchmarks)
 
 
 # --------------------------------------------------------------------------------------- the upload
@@ -326,6 +327,7 @@ class BagImports:
             job.scans_done, job.scans_total = done, total
 
         job.started = time.monotonic()
+        cpu0 = time.thread_time()
         try:
             job.run_id, job.notes = bag_to_run(
                 self.store, bag, job.file, options=self.options, on_state=state, progress=progress
@@ -338,6 +340,7 @@ class BagImports:
             job.error, job.state = f"{job.file}: import failed ({type(exc).__name__}: {exc})", "failed"
         finally:
             job.elapsed_s = time.monotonic() - job.started
+            job.cpu_s = time.thread_time() - cpu0
             shutil.rmtree(workdir, ignore_errors=True)
 
     def close(self) -> None:
