@@ -233,3 +233,12 @@ def test_damaged_bag_is_a_typed_error(tmp_path) -> None:
     bad.write_bytes(ROS1.read_bytes()[:3000])
     with pytest.raises(LogError, match=r"cut\.bag"):
         load_raw_log(bad)
+
+
+def test_given_topics_are_used_and_a_wrong_odometry_topic_names_the_right_one() -> None:
+    raw = load_raw_log(ROS1, scan_topic="/base_scan", odom_topic="/odom")
+    assert raw.notes[1:3] == ("scan topic: /base_scan (given)", "odometry: /odom (given)")
+    with pytest.raises(
+        LogError, match=r"no Odometry topic '/wheel_odom'.*its Odometry topics: /odom \(401 msgs\)"
+    ):
+        load_raw_log(ROS1, odom_topic="/wheel_odom")

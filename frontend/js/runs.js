@@ -20,7 +20,8 @@ function el(tag, attrs = {}, parent = null) {
 
 function clear(node) { while (node.firstChild) node.removeChild(node.firstChild); }
 
-const dur = (s) => (s === null || s === undefined ? "–" : s >= 60 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${fmt(s, 1)} s`);
+// whole seconds are rounded before splitting: 239.7 s is "4 min 0 s", not "3 min 60 s"
+const dur = (s) => (s === null || s === undefined ? "–" : s >= 59.95 ? `${Math.floor(Math.round(s) / 60)} min ${Math.round(s) % 60} s` : `${fmt(s, 1)} s`);
 const when = (iso) => (iso ? new Date(iso).toLocaleString() : "–");
 
 // ------------------------------------------------------------------------------------------ list
@@ -88,7 +89,8 @@ async function openRun(id) {
   $("#detail-h").textContent = `Run #${run.id}`;
   $("#detail-title").innerHTML = "";
   const title = document.createElement("p");
-  title.textContent = `${run.kind} · ${when(run.started_at)} → ${when(run.ended_at)} · ${run.robot} (${run.profile_name}) · map ${run.map_id ?? "–"} · `;
+  const robot = run.robot || run.profile_name ? ` · ${run.robot} (${run.profile_name})` : "";  // none for an imported bag
+  title.textContent = `${run.kind} · ${when(run.started_at)} → ${when(run.ended_at)}${robot} · map ${run.map_id ?? "–"} · `;
   const b = document.createElement("span");
   b.className = `outcome ${run.outcome}`;
   b.textContent = run.outcome + (run.end_reason ? ` (${run.end_reason})` : "");
