@@ -37,6 +37,7 @@ from nav.slam.time_offset import interpolate_poses
 from nav.types import OccupancyGrid, wrap_angle
 from robot.logs.errors import LogError
 from robot.logs.reader import LogRecord, RawLog, load_raw_log
+from robot.logs.rosbag import BagExtras
 
 log = logging.getLogger("navdeck.runs.import")
 
@@ -170,18 +171,13 @@ def build_samples(raw: RawLog, traj: np.ndarray, t0: float) -> np.ndarray:
     ts = t_run + t0
     pose = interpolate_poses(ts, traj[:, 0], traj[:, 1:])
     odom = interpolate_poses(ts, raw.t_odom, raw.odom)
-    ex = raw.extras
-    twist = np.asarray(ex.twist, float).reshape(-1, 3) if ex else np.zeros((0, 3))
+    ex = raw.extras or BagExtras()
+    twist = np.asarray(ex.twist, float).reshape(-1, 3)
     if twist.size and np.abs(twist).max() > 0:  # converters often leave the twist zero
-        vel = np.column_stack([np.interp(ts, np.asarray(ex.t_twist), twist[:, k]) for k in range(3)])  # type: ignore[union-attr]
+        vel = np.column_stack([np.interp(ts, np.asarray(ex.t_twist), twist[:, k]) for k in range(3)])
     else:
         vel = body_velocity(ts, odom)
-    cmd = held(
-        ts,
-        np.asarray(ex.t_cmd if ex else [], float),
-        np.asarray(ex.cmd if ex else [], float).reshape(-1, 3),
-        COMMAND_TIMEOUT,
-    )
+    cmd = held(ts, np.asarray(ex.t_cmd, float), np.asarray(ex.cmd, float).reshape(-1, 3), COMMAND_TIMEOUT)
     out = np.zeros(t_run.shape[0], dtype=codec.SAMPLE_DTYPE)
     out["t"] = t_run
     out["x"], out["y"], out["theta"] = pose[:, 0], pose[:, 1], wrap_angle(pose[:, 2])
