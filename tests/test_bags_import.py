@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import io
 import math
 import time
@@ -147,3 +148,56 @@ def test_a_finished_run_keeps_the_summary_it_was_created_with(client) -> None:
     rid = store.create_run("teleop", summary={"laser_pose": [0.1, 0.0, 1.5]})
     store.finish(rid, "completed")
     assert store.run(rid)["summary"]["laser_pose"] == [0.1, 0.0, 1.5]
+
+
+def with_map_and_localization(topic: str, typ: str, msg, t: int):
+    """The Intel slice as a robot that localized itself in its own map: /tf map -> odom at
+    (1, 2, 0.5 rad) beside every odom -> base_link, and one 40 x 30 /map."""
+    if topic == "/tf":
+        tr = msg.transforms[0]
+        v, q = tr.transform.translation, tr.transform.rotation
+        loc = dataclasses.replace(
+            tr,
+            header=dataclasses.replace(tr.header, frame_id="map"),
+            child_frame_id="odom",
+            transform=dataclasses.replace(
+                tr.transform,
+                translation=dataclasses.replace(v, x=1.0, y=2.0, z=0.0),
+                rotation=dataclasses.replace(q, x=0.0, y=0.0, z=math.sin(0.25), w=math.cos(0.25)),
+            ),
+        )
+        msg = dataclasses.replace(msg, transforms=[tr, loc])
+    yield topic, typ, msg, t
+    if topic == "/tf_static":
+        T = NOETIC.types
+        header = T["std_msgs/msg/Header"](0, msg.transforms[0].header.stamp, "map")
+        origin = T["geometry_msgs/msg/Pose"](
+            T["geometry_msgs/msg/Point"](-5.0, -3.0, 0.0),
+            T["geometry_msgs/msg/Quaternion"](0.0, 0.0, 0.0, 1.0),
+        )
+        info = T["nav_msgs/msg/MapMetaData"](header.stamp, 0.25, 40, 30, origin)
+        data = np.full(40 * 30, -1, dtype=np.int8)
+        data[:40] = 100  # the bottom row is a wall
+        yield "/map", "nav_msgs/msg/OccupancyGrid", T["nav_msgs/msg/OccupancyGrid"](header, info, data), t
+
+
+def test_a_bag_with_its_own_map_and_localization_keeps_them(client, tmp_path) -> None:
+    bag = rewrite_ros1(ROS1, tmp_path / "localized.bag", with_map_and_localization)
+    job = wait_job(client, upload(client, bag).json()["id"])
+    assert job["state"] == "done", job
+    assert "map: the bag's own (/map and /tf map -> odom); no SLAM run" in job["notes"]
+    rid = job["run_id"]
+    traj = client.get(f"/api/runs/{rid}/trajectory").json()
+    assert (
+        traj["map"]["width"] == 40
+        and traj["map"]["height"] == 30
+        and traj["map"]["origin"][:2] == [-5.0, -3.0]
+    )
+    s = traj["samples"]
+    odom = np.column_stack((s["ox"], s["oy"], s["otheta"]))
+    c, sn = math.cos(0.5), math.sin(0.5)
+    want_x = 1.0 + c * odom[:, 0] - sn * odom[:, 1]
+    want_y = 2.0 + sn * odom[:, 0] + c * odom[:, 1]
+    assert np.allclose(s["x"], want_x, atol=5e-4) and np.allclose(s["y"], want_y, atol=5e-4)
+    run = client.get(f"/api/runs/{rid}").json()
+    assert run["summary"]["imported"]["map"] == "recorded /map" and "nodes" not in run["summary"]["imported"]

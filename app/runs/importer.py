@@ -164,13 +164,14 @@ def held(t_query: np.ndarray, t: np.ndarray, values: np.ndarray, timeout: float)
     return out
 
 
-def build_samples(raw: RawLog, traj: np.ndarray, t0: float) -> np.ndarray:
-    """10 Hz SAMPLE_DTYPE rows over the scans' time span; ``traj`` (N, 4) is SLAM's t, x, y, theta."""
-    t_end = float(traj[-1, 0]) - t0
-    t_run = np.arange(0.0, t_end + 1e-9, SAMPLE_PERIOD)
+def build_samples(raw: RawLog, t_corr: np.ndarray, corr: np.ndarray, t0: float, t_end: float) -> np.ndarray:
+    """10 Hz SAMPLE_DTYPE rows from ``t0`` to ``t_end`` (seconds on the bag's clock). The map pose is
+    map -> odom (``corr`` at ``t_corr``, interpolated) composed with the odometry at each sample, as
+    a live robot's is: smooth between scans, exact at them."""
+    t_run = np.arange(0.0, t_end - t0 + 1e-9, SAMPLE_PERIOD)
     ts = t_run + t0
-    pose = interpolate_poses(ts, traj[:, 0], traj[:, 1:])
     odom = interpolate_poses(ts, raw.t_odom, raw.odom)
+    pose = compose_poses(interpolate_poses(ts, t_corr, corr), odom)
     ex = raw.extras or BagExtras()
     twist = np.asarray(ex.twist, float).reshape(-1, 3)
     if twist.size and np.abs(twist).max() > 0:  # converters often leave the twist zero
@@ -196,6 +197,30 @@ def scan_picks(stamps: np.ndarray, t0: float) -> np.ndarray:
     return first
 
 
+def compose_poses(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise a (+) b for (N, 3) poses (b expressed in a's frame)."""
+    c, s = np.cos(a[:, 2]), np.sin(a[:, 2])
+    return np.column_stack(
+        (
+            a[:, 0] + c * b[:, 0] - s * b[:, 1],
+            a[:, 1] + s * b[:, 0] + c * b[:, 1],
+            wrap_angle(a[:, 2] + b[:, 2]),
+        )
+    )
+
+
+def inverse_poses(p: np.ndarray) -> np.ndarray:
+    c, s = np.cos(p[:, 2]), np.sin(p[:, 2])
+    return np.column_stack((-c * p[:, 0] - s * p[:, 1], s * p[:, 0] - c * p[:, 1], -p[:, 2]))
+
+
+def map_correction(traj: np.ndarray, raw: RawLog) -> np.ndarray:
+    """map -> odom at each SLAM pose: ``traj`` (N, 4: t, x, y, theta of base_link in map) composed
+    with the inverse of the odometry at the same stamps."""
+    odom = interpolate_poses(traj[:, 0], raw.t_odom, raw.odom)
+    return compose_poses(traj[:, 1:], inverse_poses(odom))
+
+
 def bag_to_run(
     store: RunsStore,
     bag: Path,
@@ -205,42 +230,51 @@ def bag_to_run(
     on_state: Callable[[State], None] = lambda s: None,
     progress: Callable[[int, int], None] | None = None,
 ) -> tuple[int, list[str]]:
-    """Read ``bag``, map it, store it as a finished run; returns (run id, reader notes).
-    Raises ``LogError`` / ``SlamError`` with one line saying what is wrong."""
+    """Read ``bag``, map it (or take its recorded map and localization), store it as a finished run;
+    returns (run id, notes). Raises ``LogError`` / ``SlamError`` with one line saying what is wrong."""
     on_state("reading")
     raw = load_raw_log(bag, extras=True)
     records = raw.records()
-    on_state("mapping")
-    slam = run_offline(
-        records, raw.laser, options or SlamOptions(), progress, odometry=(raw.t_odom, raw.odom)
-    )
-    traj = slam.trajectory()
-    on_state("storing")
+    ex = raw.extras or BagExtras()
+    notes = list(raw.notes)
     stamps = np.array([float(r.stamp) for r in records])
+    info: dict = {"file": name, "scans": len(records), "commands": bool(ex.cmd)}
+    if ex.grid is not None and ex.map_odom:
+        # the robot mapped or localized itself: its map and its map-frame poses, as it saw them
+        notes.append(f"map: the bag's own ({ex.map_topic} and /tf map -> odom); no SLAM run")
+        t_corr, corr = np.asarray(ex.t_map_odom), np.asarray(ex.map_odom).reshape(-1, 3)
+        grid = ex.grid
+        info["map"] = f"recorded {ex.map_topic}"
+    else:
+        if ex.grid is not None:
+            notes.append(f"map: {ex.map_topic} recorded but no /tf map -> odom; built by offline SLAM")
+        else:
+            notes.append("map: none in the bag; built by offline SLAM")
+        on_state("mapping")
+        odometry = (raw.t_odom, raw.odom)
+        slam = run_offline(records, raw.laser, options or SlamOptions(), progress, odometry=odometry)
+        traj, grid = slam.trajectory(), slam.map()
+        t_corr, corr = traj[:, 0], map_correction(traj, raw)
+        info.update(
+            map="offline SLAM",
+            nodes=slam.num_nodes,
+            loop_closures=slam.num_loop_closures,
+            odometry_lag_ms=round(slam.odometry_lag * 1e3, 1),
+        )
+    on_state("storing")
     t0 = float(stamps[0])
-    samples = build_samples(raw, traj, t0)
+    samples = build_samples(raw, t_corr, corr, t0, float(stamps[-1]))
     laser = raw.laser
-    summary = {
-        "laser_pose": [laser.x, laser.y, laser.theta],
-        "imported": {
-            "file": name,
-            "notes": list(raw.notes),
-            "scans": len(records),
-            "nodes": slam.num_nodes,
-            "loop_closures": slam.num_loop_closures,
-            "odometry_lag_ms": round(slam.odometry_lag * 1e3, 1),
-            "commands": bool(raw.extras and raw.extras.cmd),
-        },
-    }
+    summary = {"laser_pose": [laser.x, laser.y, laser.theta], "imported": {**info, "notes": notes}}
     run_id = store.create_run(
         "mapping", robot_name="", started_at=datetime.fromtimestamp(t0, UTC), summary=summary
     )
     try:
-        _store_run(store, run_id, name, samples, stamps, t0, records, raw, slam.map())
+        _store_run(store, run_id, name, samples, stamps, t0, records, raw, grid)
     except BaseException:
         store.delete(run_id)  # no half-stored run left behind
         raise
-    return run_id, list(raw.notes)
+    return run_id, notes
 
 
 def _store_run(

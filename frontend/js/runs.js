@@ -113,7 +113,8 @@ function renderImportNotes(run) {
   ul.hidden = !info;
   if (!info) return;
   const head = document.createElement("li");
-  head.textContent = `imported from ${info.file}: ${info.scans} scans, ${info.nodes} SLAM nodes, ${info.loop_closures} loop closures`;
+  const slam = info.nodes === undefined ? "" : `, ${info.nodes} SLAM nodes, ${info.loop_closures} loop closures`;
+  head.textContent = `imported from ${info.file}: ${info.scans} scans${slam}`;
   ul.appendChild(head);
   for (const n of info.notes || []) {
     const li = document.createElement("li");

@@ -24,7 +24,7 @@ from rosbags.rosbag2 import Reader as Reader2
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.store import Typestore
 
-from nav.types import LaserScan, Pose2D
+from nav.types import GridGeometry, LaserScan, OccupancyGrid, Pose2D
 from robot.logs.errors import LogError
 from robot.logs.frames import BASE_FRAMES, LaserMount, TfTree, upright
 from robot.logs.stamp import Stamp
@@ -32,6 +32,7 @@ from robot.logs.stamp import Stamp
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
 ODOM_TYPE = "nav_msgs/msg/Odometry"
 TF_TYPE = "tf2_msgs/msg/TFMessage"
+MAP_TYPE = "nav_msgs/msg/OccupancyGrid"
 TWIST_TYPES = ("geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistStamped")
 LOG_TYPES = ("rcl_interfaces/msg/Log", "rosgraph_msgs/msg/Log")
 FALLBACK_DISTROS = ("humble", "foxy")
@@ -47,6 +48,11 @@ class BagExtras:
     t_cmd: list[float] = field(default_factory=list)
     cmd: list[tuple[float, float, float]] = field(default_factory=list)
     events: list[dict] = field(default_factory=list)  # {"t", "type": "log", "level", "name", "msg"}
+    map_topic: str = ""  # the recorded map's topic (``/map``, or the only OccupancyGrid topic)
+    grid: OccupancyGrid | None = None  # the last map recorded on it
+    t_grid: float = 0.0
+    t_map_odom: list[float] = field(default_factory=list)  # /tf map -> odom (the localization)
+    map_odom: list[tuple[float, float, float]] = field(default_factory=list)
 
 
 @dataclass
@@ -81,6 +87,20 @@ def scan_from_msg(msg, stamp: Stamp) -> LaserScan:
         range_max=float(msg.range_max),
         frame_id=str(msg.header.frame_id).lstrip("/") or "laser",
     )
+
+
+def grid_from_msg(msg) -> OccupancyGrid:
+    """nav_msgs/OccupancyGrid -> OccupancyGrid (same row-major layout, row 0 at the origin)."""
+    info = msg.info
+    o = info.origin
+    geom = GridGeometry(
+        float(info.resolution),
+        int(info.width),
+        int(info.height),
+        Pose2D(o.position.x, o.position.y, _yaw(o.orientation)),
+    )
+    data = np.asarray(msg.data, dtype=np.int8).reshape(int(info.height), int(info.width)).copy()
+    return OccupancyGrid(geom, data)
 
 
 # ------------------------------------------------------------------------------------------ opening
@@ -261,6 +281,9 @@ def read_rosbag(
                 c.topic for c in reader.connections if c.msgtype in TWIST_TYPES and "cmd_vel" in c.topic
             }
             wanted |= {c.topic for c in reader.connections if c.msgtype in LOG_TYPES}
+            maps = sorted({c.topic for c in reader.connections if c.msgtype == MAP_TYPE})
+            more.map_topic = "/map" if "/map" in maps else maps[0] if len(maps) == 1 else ""
+            wanted |= {more.map_topic} - {""}
         conns = [c for c in reader.connections if c.topic in wanted]
         try:
             for con, t_bag, raw in reader.messages(connections=conns):
@@ -297,6 +320,9 @@ def read_rosbag(
                             if odom_topic is None:
                                 t_tf.append(_sec(tr.header.stamp))
                                 tf_odom.append((v.x, v.y, _yaw(q)))
+                        elif parent == "map" and child == "odom" and more is not None:
+                            more.t_map_odom.append(_sec(tr.header.stamp))
+                            more.map_odom.append((v.x, v.y, _yaw(q)))
                         else:
                             tree.add(parent, child, (v.x, v.y, v.z), (q.x, q.y, q.z, q.w))
                 elif more is not None and typ in TWIST_TYPES:
@@ -305,6 +331,8 @@ def read_rosbag(
                     more.cmd.append((tw.linear.x, tw.linear.y, tw.angular.z))
                 elif more is not None and typ in LOG_TYPES:
                     _log_event(more, msg, typ, t_bag)
+                elif more is not None and typ == MAP_TYPE:
+                    more.grid, more.t_grid = grid_from_msg(msg), _sec(msg.header.stamp)
         except AnyReaderError as exc:
             raise LogError(f"{path.name}: cannot decode {con.topic} ({exc})") from exc
     if odom_topic is None:
