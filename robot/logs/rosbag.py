@@ -174,7 +174,10 @@ def open_bag(path: Path, notes: list[str]) -> Iterator[AnyReader]:
 def _open_without_definitions(path: Path, notes: list[str]) -> AnyReader:
     tried = []
     for label, store in typestore_candidates(path):
-        reader = _open(path, store)
+        try:
+            reader = _open(path, store)
+        except Exception as exc:  # raised inside open_bag's handler: its own except would not see it
+            raise LogError(f"{path.name}: not a readable bag ({exc})") from exc
         wanted = [c for c in reader.connections if c.msgtype in (SCAN_TYPE, ODOM_TYPE, TF_TYPE)]
         try:
             _probe(reader, wanted)
