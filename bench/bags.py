@@ -104,16 +104,16 @@ def read_formats(name: str) -> list[Figure]:
     return figs
 
 
-def import_run() -> list[Figure]:
-    """Killian (17480 scans, 29 min): import as a run (bag reading, offline SLAM, storing) against
-    ``navdeck slam`` on the same bag, then the requests the Runs page makes to open it."""
+def import_run(name: str = "killian") -> list[Figure]:
+    """Import a bag as a run (bag reading, offline SLAM, storing) against ``navdeck slam`` on the same
+    bag, then the requests the Runs page makes to open it. Killian: 17480 scans, 29 min."""
     from fastapi.testclient import TestClient
 
     from app.main import create_app
     from app.runtime import Runtime
     from app.settings import Settings
 
-    bag = SLAM_BENCHMARK / "bags" / BAGS["killian"]
+    bag = SLAM_BENCHMARK / "bags" / BAGS[name]
     with tempfile.TemporaryDirectory() as tmp:
         _, _, slam_cpu, _ = slam_cli(bag, Path(tmp) / "out")
         settings = Settings(data_dir=Path(tmp), db_url=f"sqlite:///{tmp}/navdeck.db", viewer=False)
@@ -140,10 +140,10 @@ def import_run() -> list[Figure]:
             page = time.perf_counter() - t1
     ratio = cpu / slam_cpu
     return [
-        Figure("killian navdeck slam CPU (child process)", slam_cpu, "s"),
-        Figure("killian import CPU (import worker thread)", cpu, "s"),
-        Figure("killian import wall time (upload to run stored)", wall, "s"),
-        Figure("import / navdeck slam (CPU)", ratio, "x", "< 2x", ratio < 2),
+        Figure(f"{name} navdeck slam CPU (child process)", slam_cpu, "s"),
+        Figure(f"{name} import CPU (import worker thread)", cpu, "s"),
+        Figure(f"{name} import wall time (upload to run stored)", wall, "s"),
+        Figure(f"{name} import / navdeck slam (CPU)", ratio, "x", "< 2x", ratio < 2),
         Figure("Runs page requests to open it (detail, trajectory, map.png)", page, "s", "< 3 s", page < 3),
     ]
 
@@ -152,4 +152,5 @@ BENCHMARKS = [
     *(Benchmark(name=f"bags.{n}", run=lambda n=n: formats(n), group="slow") for n in BAGS),
     *(Benchmark(name=f"bags.read.{n}", run=lambda n=n: read_formats(n), group="slow") for n in BAGS),
     Benchmark(name="bags.import", run=import_run, group="slow"),
+    Benchmark(name="bags.import_aces", run=lambda: import_run("aces"), group="slow"),
 ]
