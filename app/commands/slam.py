@@ -20,8 +20,16 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("slam", help="build a map and trajectory from a recorded log (ROS bag, MCAP, CARMEN)")
     p.add_argument("log", type=Path, help="ROS1 .bag, ROS2 bag folder, .mcap or CARMEN .log")
     p.add_argument("--format", choices=["auto", "rosbag", "carmen"], default="auto")
-    p.add_argument("--scan-topic", default="/scan")
-    p.add_argument("--odom-topic", default="/odom")
+    p.add_argument(
+        "--scan-topic",
+        default=None,
+        help="sensor_msgs/LaserScan topic (default: the bag's only LaserScan topic)",
+    )
+    p.add_argument(
+        "--odom-topic",
+        default=None,
+        help="nav_msgs/Odometry topic (default: /odom or the only one, else /tf odom -> base_link)",
+    )
     p.add_argument("--profile", help="robot profile: laser mount pose and max range (default: from the log)")
     p.add_argument("--out", type=Path, required=True, help="output directory")
     p.add_argument(
@@ -74,6 +82,8 @@ def run(args: argparse.Namespace) -> int:
         raw = load_raw_log(args.log, args.format, args.scan_topic, args.odom_topic, max(args.limit, 0))
     except LogError as exc:
         raise CliError(str(exc)) from None
+    for note in raw.notes:  # what was found in the bag: topics, typestore, laser mount
+        print(note, file=sys.stderr)
     records, laser = raw.records(), raw.laser
     options = SlamOptions()
     if args.profile:

@@ -242,7 +242,8 @@ class RunsStore:
             run.ended_at = run.started_at + timedelta(seconds=duration)
             run.outcome = outcome_fn(run.kind, summary) if outcome_fn else outcome
             run.end_reason = end_reason[:200]
-            run.summary = summary
+            # what the run was created with (laser_pose, import details) stays beside the metrics
+            run.summary = {**(run.summary or {}), **summary}
             s.add(run)
             s.commit()
             return {"id": run_id, "outcome": run.outcome, "summary": summary}

@@ -1,6 +1,6 @@
 // Runs page: list with filters and paging, detail with numbers, trajectory over the map, speed plot,
 // event timeline (SVG drawn here, no libraries) and replay controls for the 3D view at /replay/viz/.
-import { $, api, fmt, message, wireEstop } from "./core.js";
+import { $, api, fmt, message, upload, wireEstop } from "./core.js";
 
 const PAGE = 25;
 const SVG = "http://www.w3.org/2000/svg";
@@ -20,7 +20,8 @@ function el(tag, attrs = {}, parent = null) {
 
 function clear(node) { while (node.firstChild) node.removeChild(node.firstChild); }
 
-const dur = (s) => (s === null || s === undefined ? "–" : s >= 60 ? `${Math.floor(s / 60)} min ${Math.round(s % 60)} s` : `${fmt(s, 1)} s`);
+// whole seconds are rounded before splitting: 239.7 s is "4 min 0 s", not "3 min 60 s"
+const dur = (s) => (s === null || s === undefined ? "–" : s >= 59.95 ? `${Math.floor(Math.round(s) / 60)} min ${Math.round(s) % 60} s` : `${fmt(s, 1)} s`);
 const when = (iso) => (iso ? new Date(iso).toLocaleString() : "–");
 
 // ------------------------------------------------------------------------------------------ list
@@ -88,18 +89,84 @@ async function openRun(id) {
   $("#detail-h").textContent = `Run #${run.id}`;
   $("#detail-title").innerHTML = "";
   const title = document.createElement("p");
-  title.textContent = `${run.kind} · ${when(run.started_at)} → ${when(run.ended_at)} · ${run.robot} (${run.profile_name}) · map ${run.map_id ?? "–"} · `;
+  const robot = run.robot || run.profile_name ? ` · ${run.robot} (${run.profile_name})` : "";  // none for an imported bag
+  title.textContent = `${run.kind} · ${when(run.started_at)} → ${when(run.ended_at)}${robot} · map ${run.map_id ?? "–"} · `;
   const b = document.createElement("span");
   b.className = `outcome ${run.outcome}`;
   b.textContent = run.outcome + (run.end_reason ? ` (${run.end_reason})` : "");
   title.appendChild(b);
   $("#detail-title").appendChild(title);
+  renderImportNotes(run);
   renderNumbers(run);
   renderDownloads(run);
   renderTrajectory(traj, run);
   renderSpeed(traj, run);
   renderTimeline(run);
   resetReplay(run);
+}
+
+// A run imported from a bag says where it came from and what the reader chose (topics, typestore, mount).
+function renderImportNotes(run) {
+  const info = (run.summary || {}).imported;
+  const ul = $("#import-notes");
+  clear(ul);
+  ul.hidden = !info;
+  if (!info) return;
+  const head = document.createElement("li");
+  const slam = info.nodes === undefined ? "" : `, ${info.nodes} SLAM nodes, ${info.loop_closures} loop closures`;
+  head.textContent = `imported from ${info.file}: ${info.scans} scans${slam}`;
+  ul.appendChild(head);
+  for (const n of info.notes || []) {
+    const li = document.createElement("li");
+    li.textContent = n;
+    ul.appendChild(li);
+  }
+}
+
+// ------------------------------------------------------------------------------------------ bag import
+// Upload with a progress bar (bytes sent), then the server's progress (scans mapped) until the run exists.
+const IMPORT_STATES = { queued: "queued", reading: "reading the bag", mapping: "mapping", storing: "storing the run" };
+
+function initBagImport() {
+  const form = $("#bag-form");
+  const bar = $("#bag-progress");
+  const status = $("#bag-status");
+  form.addEventListener("submit", async (ev) => {
+    ev.preventDefault();
+    const file = $("#bag-file").files[0];
+    if (!file) return;
+    const fd = new FormData();
+    fd.append("file", file);
+    bar.hidden = false;
+    bar.value = 0;
+    $("#bag-submit").disabled = true;
+    try {
+      let job = await upload("/api/runs/import", fd, (f) => { bar.value = f; status.textContent = `uploading ${Math.round(f * 100)}%`; });
+      while (job.state !== "done" && job.state !== "failed") {
+        await new Promise((r) => setTimeout(r, 500));
+        job = await api("GET", `/api/runs/import/${job.id}`);
+        const frac = job.scans_total ? job.scans_done / job.scans_total : 0;
+        bar.value = frac;
+        status.textContent = job.state === "mapping"
+          ? `mapping ${job.scans_done} / ${job.scans_total} scans`
+          : IMPORT_STATES[job.state] || job.state;
+      }
+      if (job.state === "failed") {
+        status.textContent = "failed";
+        message(`import of ${job.file} failed: ${job.error}`, "error");
+        return;
+      }
+      bar.value = 1;
+      status.textContent = `run #${job.run_id}`;
+      message(`imported ${job.file} as run #${job.run_id}`, "ok");
+      form.reset();
+      page.offset = 0;
+      await loadList();
+      await openRun(job.run_id);
+    } catch { status.textContent = "failed"; } finally {
+      $("#bag-submit").disabled = false;
+    }
+  });
 }
 
 function renderNumbers(run) {
@@ -330,6 +397,7 @@ function init() {
     loadList();
   };
   initReplay();
+  initBagImport();
   loadMaps();
   loadList();
   const wanted = Number(new URLSearchParams(location.search).get("run"));

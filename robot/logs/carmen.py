@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from nav.types import LaserScan, Pose2D, wrap_angle
+from robot.logs.errors import LogError
 from robot.logs.stamp import Stamp
 
 _MAX_RANGE = 80.0  # CARMEN SICK logs saturate at 81.83 m
@@ -32,8 +33,6 @@ def _scan(stamp: Stamp, ranges: np.ndarray, angle_min: float, inc: float, rmax: 
 def read_carmen(
     path: Path,
 ) -> tuple[list[Stamp], list[LaserScan], list[float], list[tuple[float, float, float]], Pose2D]:
-    from robot.logs.reader import LogError
-
     stamps: list[Stamp] = []
     scans: list[LaserScan] = []
     t_odom: list[float] = []

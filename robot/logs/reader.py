@@ -3,9 +3,10 @@
 Each record pairs a laser scan with the odometry pose (odom -> base_link) interpolated at the scan's
 stamp, the way a SLAM front end would see it live. Formats:
 
-- ``rosbag``: ROS1 bags, ROS2 bag folders and MCAP files, through the ``rosbags`` package
-  (sensor_msgs/LaserScan + nav_msgs/Odometry, or tf odom -> base_link when there is no odometry
-  topic); the static laser pose comes from ``/tf_static`` (see :func:`laser_pose`).
+- ``rosbag``: ROS1 bags, ROS 2 bags (folders, single ``.db3`` or ``.mcap`` files, with or without
+  embedded message definitions) through the ``rosbags`` package: the only sensor_msgs/LaserScan
+  topic, nav_msgs/Odometry or else tf odom -> base_link, the laser mount from the tf tree
+  (:mod:`robot.logs.rosbag`, :mod:`robot.logs.frames`).
 - ``carmen``: CARMEN text logs (``FLASER``, ``ROBOTLASER1``, ``ODOM`` lines; Montemerlo et al. 2003).
 """
 
@@ -19,13 +20,12 @@ import numpy as np
 
 from nav.slam.time_offset import interpolate_poses
 from nav.types import LaserScan, Pose2D
+from robot.logs.carmen import read_carmen
+from robot.logs.errors import LogError
+from robot.logs.rosbag import BagExtras, read_rosbag
 from robot.logs.stamp import Stamp
 
 LogFormat = Literal["auto", "rosbag", "carmen"]
-
-
-class LogError(ValueError):
-    """A log that cannot be read or holds no usable scans."""
 
 
 class LogRecord(NamedTuple):
@@ -60,6 +60,8 @@ class RawLog(NamedTuple):
     t_odom: np.ndarray  # (M,) seconds
     odom: np.ndarray  # (M, 3) odom -> base_link poses
     laser: Pose2D
+    notes: tuple[str, ...] = ()  # what the reader chose (topics, typestore, laser mount), to print
+    extras: BagExtras | None = None  # twists, commands, log events (``extras=True``, bags only)
 
     def records(self, lag: float = 0.0) -> list[LogRecord]:
         """Records in stamp order, odometry interpolated at ``t_scan - lag``."""
@@ -72,39 +74,53 @@ class RawLog(NamedTuple):
 def load_raw_log(
     path: str | Path,
     fmt: LogFormat = "auto",
-    scan_topic: str = "/scan",
-    odom_topic: str = "/odom",
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
     max_scans: int = 0,
+    *,
+    extras: bool = False,
 ) -> RawLog:
-    """Read a log without pairing scans and odometry yet (see :func:`load_log`)."""
+    """Read a log without pairing scans and odometry yet (see :func:`load_log`). Topics left None
+    are found in the bag (see :func:`robot.logs.rosbag.choose_topics`)."""
     p = Path(path)
     if not p.exists():
         raise LogError(f"no such log: {p}")
     kind = detect_format(p) if fmt == "auto" else fmt
+    notes: list[str] = []
+    more = None
     if kind == "rosbag":
-        from robot.logs.rosbag import read_rosbag
-
-        stamps, scans, t_odom, odom, laser = read_rosbag(p, scan_topic, odom_topic, max_scans)
+        bag = read_rosbag(p, scan_topic, odom_topic, max_scans, extras=extras)
+        stamps, scans, t_odom, odom, laser, notes, more = (
+            bag.stamps,
+            bag.scans,
+            bag.t_odom,
+            bag.odom,
+            bag.laser,
+            bag.notes,
+            bag.extras,
+        )
     elif kind == "carmen":
-        from robot.logs.carmen import read_carmen
-
         stamps, scans, t_odom, odom, laser = read_carmen(p)
         if max_scans:
             stamps, scans = stamps[:max_scans], scans[:max_scans]
     else:
         raise LogError(f"unknown log format {fmt!r}")
     if not scans:
-        raise LogError(f"{p.name}: no usable laser scans (scan topic {scan_topic!r})")
+        raise LogError(f"{p.name}: no usable laser scans ({'; '.join(notes) or 'no scan lines'})")
     if len(t_odom) == 0:
-        raise LogError(f"{p.name}: no odometry (odom topic {odom_topic!r} nor tf odom->base_link)")
-    return RawLog(stamps, scans, np.asarray(t_odom, float), np.asarray(odom, float).reshape(-1, 3), laser)
+        raise LogError(
+            f"{p.name}: no odometry samples ({'; '.join(n for n in notes if n.startswith('odometry'))}); "
+            "pass --odom-topic"
+        )
+    odom_arr = np.asarray(odom, float).reshape(-1, 3)
+    return RawLog(stamps, scans, np.asarray(t_odom, float), odom_arr, laser, tuple(notes), more)
 
 
 def load_log(
     path: str | Path,
     fmt: LogFormat = "auto",
-    scan_topic: str = "/scan",
-    odom_topic: str = "/odom",
+    scan_topic: str | None = None,
+    odom_topic: str | None = None,
     max_scans: int = 0,
 ) -> tuple[list[LogRecord], Pose2D]:
     """Read a log: its records (in stamp order) and the laser pose in base_link. ``max_scans > 0``
@@ -114,7 +130,7 @@ def load_log(
 
 
 def read_log(
-    path: str | Path, fmt: LogFormat = "auto", scan_topic: str = "/scan", odom_topic: str = "/odom"
+    path: str | Path, fmt: LogFormat = "auto", scan_topic: str | None = None, odom_topic: str | None = None
 ) -> Iterator[LogRecord]:
     """Iterate ``(stamp, LaserScan, odom Pose2D)`` over a log. Raises :class:`LogError` when the log
     has no usable scans or no odometry."""
@@ -122,7 +138,7 @@ def read_log(
     return iter(recs)
 
 
-def count_scans(path: str | Path, fmt: LogFormat = "auto", scan_topic: str = "/scan") -> int:
+def count_scans(path: str | Path, fmt: LogFormat = "auto", scan_topic: str | None = None) -> int:
     """Number of usable scans (reads the log)."""
     recs, _ = load_log(path, fmt, scan_topic)
     return len(recs)

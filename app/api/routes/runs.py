@@ -6,14 +6,17 @@ import contextlib
 from datetime import date, datetime, time, timedelta
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, HTTPException, Query, WebSocket
+from fastapi import APIRouter, Depends, File, HTTPException, Query, UploadFile, WebSocket
+from fastapi.concurrency import run_in_threadpool
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel, get_runtime
+from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, OpenOut, Out, Page, Pair, Timestamp, Triple
 from app.export.data import RunData, load_run
+from app.runs.importer import BagImports, ImportInputError, ImportJob
 from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, utc_aware
 from app.runtime import Runtime
 
@@ -175,6 +178,72 @@ def _found(fn, *args):
         return fn(*args)
     except RunNotFound:
         raise HTTPException(404, f"no run with id {args[0]}") from None
+
+
+# ------------------------------------------------------------------------------------- bag import
+def get_imports(rt: RuntimeDep, store: StoreDep) -> BagImports:
+    """The server's import queue (one per runtime, closed with it: Runtime.close closes features)."""
+    imports = rt.features.get("bag_imports")
+    if imports is None:
+        imports = rt.features.setdefault("bag_imports", BagImports(store))
+    return imports
+
+
+ImportsDep = Annotated[BagImports, Depends(get_imports)]
+
+
+class ImportJobOut(Out):
+    """A bag import: queued, then reading the bag, mapping it (offline SLAM), storing the run."""
+
+    id: int
+    file: str = Field(description="the uploaded file's name")
+    size_bytes: int
+    state: Literal["queued", "reading", "mapping", "storing", "done", "failed"]
+    scans_done: int = Field(description="scans mapped so far (state `mapping`)")
+    scans_total: int
+    run_id: int | None = Field(description="the run created (state `done`)")
+    notes: list[str] = Field(description="what was found in the bag: typestore, topics, laser mount")
+    error: str = Field(description="one line saying what is wrong (state `failed`)")
+    elapsed_s: float
+
+    @classmethod
+    def of(cls, job: ImportJob) -> ImportJobOut:
+        return cls(**{k: getattr(job, k) for k in cls.model_fields})
+
+
+@router.post(
+    "/api/runs/import",
+    summary="Import a recorded ROS bag as a run (ROS1 .bag, ROS 2 .db3 / .mcap, zipped rosbag2 folder)",
+    description="Answers 202 at once with the import job; poll `GET /api/runs/import/{id}` until "
+    "`state` is `done` (then `run_id` is the new run) or `failed` (`error`). Topics, frames and the "
+    "message typestore are found in the bag; its map is built by offline SLAM.",
+    status_code=202,
+    responses={
+        **ERRORS(s422="not a bag (wrong extension or contents, empty, unreadable archive)"),
+        413: {"description": "larger than the server's max_upload_bytes"},
+    },
+)
+async def import_bag(
+    imports: ImportsDep,
+    file: Annotated[UploadFile, File(description="the bag, or a rosbag2 directory as .zip / .tar.gz")],
+) -> ImportJobOut:
+    try:
+        job = await run_in_threadpool(imports.submit, file.file, file.filename or "")
+    except ImportInputError as exc:
+        raise ProblemError(422, str(exc), kind="not-a-bag") from None
+    return ImportJobOut.of(job)
+
+
+@router.get(
+    "/api/runs/import/{job_id}",
+    summary="A bag import's progress and result",
+    responses=ERRORS(s404="no such import job (jobs live until the server restarts)"),
+)
+def import_status(job_id: int, imports: ImportsDep) -> ImportJobOut:
+    job = imports.get(job_id)
+    if job is None:
+        raise ProblemError(404, f"no import job {job_id}", kind="not-found")
+    return ImportJobOut.of(job)
 
 
 @router.get(
