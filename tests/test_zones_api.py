@@ -87,7 +87,9 @@ def test_a_goal_inside_a_keepout_zone_of_the_active_map_is_refused(client, map_i
     assert client.post("/api/localization/initial_pose", json=start).status_code == 200
     goal = {"x": 3.0, "y": 1.2, "theta": 0.0}
     zone = [[2.6, 0.9], [3.4, 0.9], [3.4, 1.5], [2.6, 1.5]]
-    r = client.post(f"/api/maps/{map_id}/zones", json={"name": "wet floor", "kind": "keepout", "polygon": zone})
+    r = client.post(
+        f"/api/maps/{map_id}/zones", json={"name": "wet floor", "kind": "keepout", "polygon": zone}
+    )
     assert r.status_code == 201
     zid = r.json()["id"]
     try:
