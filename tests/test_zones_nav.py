@@ -106,6 +106,8 @@ def test_telemetry_names_the_speed_limit_and_its_zone(tmp_path: Path) -> None:
         limit = out["zones"]["speed_limit"]
         assert limit["linear"] == 0.1 and "aisle" in limit["reason"]
         assert "speed_limit" in out["clamped"]
+        ((kind, label, vertices),) = rt.session.bus.latest.extras["zone_layer"]  # the 3D view's layer
+        assert kind == "speed" and label == "aisle (0.1 m/s)" and vertices.shape == (4, 2)
         cmd = rt.session.last_command
         assert math.hypot(cmd.vx, cmd.vy) <= 0.1 + 1e-9
         assert abs(cmd.wz / cmd.vx - 1.25) < 1e-9  # the same arc as asked

@@ -44,6 +44,10 @@ class ActiveZones:
     zones: tuple[Zone, ...] = ()
     vertices: tuple[np.ndarray, ...] = ()
 
+    def layer(self) -> tuple[tuple[str, str, np.ndarray], ...]:
+        """(kind, label, vertices) per zone: what the 3D view's Zones layer draws."""
+        return tuple((z.kind.value, _label(z), v) for z, v in zip(self.zones, self.vertices, strict=True))
+
 
 class Zones:
     """The zones stage. ``reload`` is thread-safe (API); ``tick`` runs on the control loop."""
@@ -56,6 +60,7 @@ class Zones:
         self.max_speed = session.profile.limits.max_vel_x
         self._lock = threading.Lock()
         self._active = ActiveZones(None)
+        self._layer: tuple[tuple[str, str, np.ndarray], ...] = ()
         self._grid: OccupancyGrid | None = None
         self._inside: tuple[int, ...] = ()
         self.speed_limit: SpeedLimit | None = None
@@ -86,6 +91,7 @@ class Zones:
         with self._lock:  # two API calls at once must not apply an older set last
             zones = tuple(self.store.for_map(map_id)) if map_id is not None else ()
             self._active = ActiveZones(map_id, zones, tuple(z.vertices() for z in zones))
+            self._layer = self._active.layer()
             keepout = [z.vertices() for z in zones if z.kind == ZoneKind.KEEPOUT]
             if self.navigation is not None and self._grid is not None:
                 geo = self._grid.geometry
@@ -148,11 +154,18 @@ class Zones:
         }
 
     def snapshot_fields(self, session: Session) -> dict[str, Any] | None:
-        # the ActiveZones object is replaced on every change: the 3D view redraws only then
-        return {"extras": {"zones": self.state(), "zone_layer": self._active}}
+        # a new tuple on every change: the 3D view redraws only then
+        return {"extras": {"zones": self.state(), "zone_layer": self._layer}}
 
     def close(self) -> None:
         self.session.speed_limit = None
+
+
+def _label(z: Zone) -> str:
+    if z.kind == ZoneKind.KEEPOUT:
+        return f"{z.name} (keepout)"
+    unit = " %" if z.speed_limit_unit.value == "percent" else " m/s"
+    return f"{z.name} ({z.speed_limit:g}{unit})"
 
 
 def _zone_fields(z: Zone) -> dict[str, Any]:
