@@ -15,6 +15,7 @@ the API (``reload``).
 from __future__ import annotations
 
 import logging
+import math
 import threading
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
@@ -32,6 +33,10 @@ if TYPE_CHECKING:
     from robot.base import SensorFrame
 
 log = logging.getLogger("navdeck")
+
+LOOKAHEAD_PERIODS = 3
+"""Control periods of travel added to the braking distance when looking for a speed zone ahead: the
+command reaching the base and the pose estimate both lag the true position by about a period."""
 
 ORDER = 150  # after navigation (its map listener runs first, so a new map's mask follows its costmaps)
 
@@ -58,6 +63,7 @@ class Zones:
         self.localization = localization
         self.navigation = navigation
         self.max_speed = session.profile.limits.max_vel_x
+        self.decel = session.profile.limits.decel_lim_x
         self._lock = threading.Lock()
         self._active = ActiveZones(None)
         self._layer: tuple[tuple[str, str, np.ndarray], ...] = ()
@@ -101,11 +107,15 @@ class Zones:
     # ------------------------------------------------------------------ the stage (loop thread)
     def tick(self, session: Session, frame: SensorFrame, now: float) -> None:
         active = self._active
-        here = np.array([[session.pose.x, session.pose.y]])
-        inside = tuple(
-            z.id for z, v in zip(active.zones, active.vertices, strict=True) if points_in_polygon(here, v)[0]
-        )
-        if inside != self._inside:
+        ahead = self._ahead(session)
+        inside, coming = [], []
+        for z, v in zip(active.zones, active.vertices, strict=True):
+            hit = points_in_polygon(ahead, v)
+            if hit[0]:
+                inside.append(z.id)
+            if hit.any():
+                coming.append(z)
+        if tuple(inside) != self._inside:
             by_id = {z.id: z for z in active.zones}
             for zid in self._inside:
                 if zid not in inside and zid in by_id:
@@ -113,8 +123,24 @@ class Zones:
             for zid in inside:
                 if zid not in self._inside:
                     session.add_event("zone", action="enter", **_zone_fields(by_id[zid]))
-            self._inside = inside
-        self._set_limit(session, [z for z in active.zones if z.id in inside])
+            self._inside = tuple(inside)
+        self._set_limit(session, coming)
+
+    def _ahead(self, session: Session) -> np.ndarray:
+        """The robot's position and points ahead of it along its motion, as far as it needs to slow
+        from top speed to a stop plus a few control periods: the limit must be met at the zone's edge,
+        not after it (the base decelerates at most at ``decel_lim_x``). The distance uses the top
+        speed, not the present one, so that slowing down does not bring the robot "out of reach" and
+        let it speed up again. Row 0 is the robot's position."""
+        p, v = session.pose, session.velocity
+        if math.hypot(v.vx, v.vy) < 1e-3:
+            return np.array([[p.x, p.y]])
+        top = self.max_speed
+        decel = abs(self.decel) if self.decel else 1.0
+        reach = top * top / (2.0 * decel) + LOOKAHEAD_PERIODS * top * session.period
+        heading = p.theta + math.atan2(v.vy, v.vx)
+        s = np.linspace(0.0, reach, 6)
+        return np.column_stack((p.x + s * math.cos(heading), p.y + s * math.sin(heading)))
 
     def _set_limit(self, session: Session, zones: list[Zone]) -> None:
         best: tuple[float, Zone] | None = None
