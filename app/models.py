@@ -211,3 +211,17 @@ class ZoneRecord(SQLModel, table=True):
     speed_limit_unit: str = Field(default="percent", max_length=10)  # percent | m/s
     created_at: datetime = Field(default_factory=utcnow)
     updated_at: datetime = Field(default_factory=utcnow)
+
+
+class PlaceRecord(SQLModel, table=True):
+    """A named pose on one map ("dock", "bed 3"): a goal by name (migration 0006)."""
+
+    __tablename__ = "places"
+    __table_args__ = (Index("uq_places_map_name", "map_id", "name", unique=True),)
+    id: int | None = Field(default=None, primary_key=True)
+    map_id: int = Field(foreign_key="maps.id", index=True, ondelete="CASCADE")
+    name: str = Field(max_length=100)
+    x: float
+    y: float
+    theta: float = 0.0
+    created_at: datetime = Field(default_factory=utcnow)
