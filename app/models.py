@@ -56,6 +56,10 @@ class MapRecord(SQLModel, table=True):
     run_id: int | None = Field(default=None, index=True)
     created_at: datetime = Field(default_factory=utcnow)
     updated_at: datetime = Field(default_factory=utcnow)
+    # Versions (migration 0007): an edit saves a new row; ``parent_id`` is the version it was made
+    # from (None for an original), ``version`` counts from 1 along the chain.
+    parent_id: int | None = Field(default=None, index=True)
+    version: int = 1
 
 
 class Run(SQLModel, table=True):

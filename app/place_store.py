@@ -69,3 +69,12 @@ class PlaceStore:
             s.delete(rec)
             s.commit()
             return True
+
+    def copy(self, from_map: int, to_map: int) -> int:
+        """Copy every place of one map (version) to another (a new version of the same map)."""
+        places = self.for_map(from_map)
+        with Session(self.engine) as s:
+            for p in places:
+                s.add(PlaceRecord(map_id=to_map, name=p.name, x=p.pose.x, y=p.pose.y, theta=p.pose.theta))
+            s.commit()
+        return len(places)

@@ -214,6 +214,24 @@ class Costmap2D:
             return self._keepout
         return sample_costs(self._keepout.view(np.uint8), self._keepout_geometry, self.geometry) == 1
 
+    def update_static(self, grid: OccupancyGrid, bounds: tuple[int, int, int, int] | None = None) -> None:
+        """A new version of the static map with the same geometry (an edit): only the cells in
+        ``bounds`` (r0, r1, c0, c1; default all) are re-interpreted, and only around them re-inflated."""
+        if self._static_full is None or self._static_geometry != grid.geometry:
+            raise CostmapError("update_static needs a static layer built from a map of the same geometry")
+        g = grid.geometry
+        r0, r1, c0, c1 = bounds or (0, g.height, 0, g.width)
+        block = OccupancyGrid(GridGeometry(g.resolution, c1 - c0, r1 - r0, g.origin), grid.data[r0:r1, c0:c1])
+        self._static_full = self._static_full.copy()  # snapshots taken before keep the old map
+        self._static_full[r0:r1, c0:c1] = static_costs(
+            block, self.options.static_layer, track_unknown_space=self.options.track_unknown_space
+        )
+        self._base = self._static_window()
+        if self._static_geometry == self.geometry:
+            self._dirty = _union(self._dirty, (r0, r1, c0, c1))
+        else:  # a rolling window: its sampled copy was rebuilt, refresh it all
+            self._dirty = (0, self.geometry.height, 0, self.geometry.width)
+
     def set_keepout(self, mask: np.ndarray | None, geometry: GridGeometry | None = None) -> None:
         """Keepout filter (Nav2 ``KeepoutFilter``): cells where the (H, W) bool ``mask`` (over
         ``geometry``, default this costmap's) is true are lethal; None removes it. Unlike Nav2, which
