@@ -125,11 +125,13 @@ class MapStore:
         return _info(rec)
 
     def add_version(self, parent: MapInfo, grid: OccupancyGrid) -> MapInfo:
-        """Save an edited map as a new version of ``parent`` (same name; the parent stays as it is)."""
+        """Save an edited map as a new version of ``parent``, named after the original with its
+        version number (``office v2``; names stay unique); the parent stays as it is."""
         if grid.geometry != self.grid_geometry(parent.id):
             raise ValueError("a new version keeps the map's geometry")
+        original = self.lineage(parent.id)[0]
         return self.add(
-            parent.name,
+            self.free_name(f"{original.name} v{parent.version + 1}"),
             grid,
             source="edit",
             robot_id=parent.robot_id,

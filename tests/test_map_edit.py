@@ -74,6 +74,7 @@ def test_an_edit_is_a_new_version_activated_on_request(client) -> None:
     assert r.status_code == 201, r.text
     v2 = r.json()
     assert v2["version"] == 2 and v2["parent_id"] == map_id and v2["changed_cells"] > 80
+    assert v2["name"] == "apartment v2" and v2["active"] is False
     assert r.headers["location"] == f"/api/maps/{v2['id']}"
     chain = client.get(f"/api/maps/{v2['id']}/versions").json()["items"]
     assert [m["id"] for m in chain] == [map_id, v2["id"]]

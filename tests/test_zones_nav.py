@@ -92,6 +92,7 @@ def test_a_speed_zone_limits_teleop_and_says_why(tmp_path: Path) -> None:
 
 
 def test_telemetry_names_the_speed_limit_and_its_zone(tmp_path: Path) -> None:
+    from app.api.ws_schema import ZonesMsg
     from app.telemetry import snapshot_dict
 
     rt = runtime(tmp_path)
@@ -103,6 +104,7 @@ def test_telemetry_names_the_speed_limit_and_its_zone(tmp_path: Path) -> None:
             rt.session.set_teleop(Twist2D(0.2, 0.0, 0.25), "test")
             rt.session.run_for(0.05)
         out = snapshot_dict(rt.session.bus.latest, "test")
+        ZonesMsg.model_validate(out["zones"])  # the telemetry schema (/api/schemas/ws/telemetry.json)
         limit = out["zones"]["speed_limit"]
         assert limit["linear"] == 0.1 and "aisle" in limit["reason"]
         assert "speed_limit" in out["clamped"]

@@ -9,13 +9,14 @@ from __future__ import annotations
 from typing import Annotated, Literal
 
 import numpy as np
-from fastapi import APIRouter, Response
+from fastapi import APIRouter, Query, Response
 from fastapi.concurrency import run_in_threadpool
-from pydantic import BaseModel, Field
+from pydantic import Field
 
 from app.api.deps import RuntimeDep, StrictModel
-from app.api.problems import ProblemError, problem_responses
-from app.map_store import MapInfo
+from app.api.problems import ProblemError
+from app.api.routes.maps import MapOut, active_map_id, map_out
+from app.api.schemas import ERRORS, DbId, Page, Pair
 from app.place_store import PlaceStore
 from app.zone_store import ZoneStore
 from nav.costmap.filter_layer import MAX_VERTICES, PolygonError, validate_polygon
@@ -24,14 +25,13 @@ from nav.map_edit import Fill, Operation, Stroke, apply_edits
 router = APIRouter(tags=["maps"])
 
 Value = Literal["free", "occupied", "unknown"]
-Point = tuple[float, float]
 
 
 class BrushOp(StrictModel):
     """A brush stroke: every cell within ``radius`` of the polyline through ``points``."""
 
     op: Literal["brush"]
-    points: list[Point] = Field(min_length=1, max_length=10_000, description="map frame, m")
+    points: list[Pair] = Field(min_length=1, max_length=10_000, description="map frame, m")
     radius: float = Field(gt=0, le=10.0, description="m")
     value: Value
 
@@ -40,8 +40,8 @@ class LineOp(StrictModel):
     """A line wall from ``start`` to ``end``, ``width`` wide (a glass wall the lidar cannot see)."""
 
     op: Literal["line"]
-    start: Point
-    end: Point
+    start: Pair
+    end: Pair
     width: float = Field(0.05, gt=0, le=10.0, description="m")
     value: Value = "occupied"
 
@@ -50,7 +50,7 @@ class PolygonOp(StrictModel):
     """Fill a polygon (erase a region: ``unknown`` or ``free``)."""
 
     op: Literal["polygon"]
-    polygon: list[Point] = Field(max_length=MAX_VERTICES + 1)
+    polygon: list[Pair] = Field(max_length=MAX_VERTICES + 1)
     value: Value
 
 
@@ -61,33 +61,17 @@ class EditIn(StrictModel):
     operations: list[EditOp] = Field(min_length=1, max_length=1000, description="applied in order")
 
 
-class MapVersionOut(BaseModel):
-    id: int
-    name: str
-    version: int = Field(description="1 for an original, +1 per edit along the chain")
-    parent_id: int | None = Field(description="the version this one was edited from")
-    source: str
-    width: int
-    height: int
-    resolution: float
-    created_at: str
-    thumbnail_url: str
+class EditOut(MapOut):
+    """The new version (not active until activated), and what the edit changed."""
 
-
-class EditOut(MapVersionOut):
     changed_cells: int
-    changed_bounds: tuple[int, int, int, int] | None = Field(
-        description="rows r0..r1, columns c0..c1 (half-open)"
+    changed_bounds: list[int] | None = Field(
+        description="rows r0..r1, columns c0..c1 (half-open) of the changed cells; None: nothing changed"
     )
 
 
-class VersionList(BaseModel):
-    items: list[MapVersionOut] = Field(description="the original first, this map last")
-
-
-def version_out(info: MapInfo) -> MapVersionOut:
-    d = info.as_dict()
-    return MapVersionOut(**{k: d[k] for k in MapVersionOut.model_fields})
+class VersionPage(Page[MapOut]):
+    """The versions a map descends from: the original first, the map itself last."""
 
 
 def _operation(op: BrushOp | LineOp | PolygonOp) -> Operation:
@@ -106,9 +90,9 @@ def _operation(op: BrushOp | LineOp | PolygonOp) -> Operation:
     status_code=201,
     response_model=EditOut,
     summary="Save an edit of a map as its new version (not activated)",
-    responses=problem_responses(s404="no such map", s422="an invalid polygon"),
+    responses=ERRORS(s404="no such map", s422="an invalid polygon"),
 )
-async def edit_map(map_id: int, body: EditIn, rt: RuntimeDep, response: Response) -> EditOut:
+async def edit_map(map_id: DbId, body: EditIn, rt: RuntimeDep, response: Response) -> EditOut:
     parent = rt.maps.info(map_id)
     grid = rt.maps.grid(map_id) if parent is not None else None
     if parent is None or grid is None:
@@ -119,17 +103,25 @@ async def edit_map(map_id: int, body: EditIn, rt: RuntimeDep, response: Response
     await run_in_threadpool(ZoneStore(rt.engine).copy, parent.id, info.id)
     await run_in_threadpool(PlaceStore(rt.engine).copy, parent.id, info.id)
     response.headers["Location"] = f"/api/maps/{info.id}"
-    return EditOut(**version_out(info).model_dump(), changed_cells=n, changed_bounds=bounds)
+    out = map_out(info, active_map_id(rt)).model_dump()
+    return EditOut(**out, changed_cells=n, changed_bounds=None if bounds is None else list(bounds))
 
 
 @router.get(
     "/api/maps/{map_id}/versions",
-    response_model=VersionList,
+    response_model=VersionPage,
     summary="The versions this map descends from, the original first (each downloadable, activatable)",
-    responses=problem_responses(s404="no such map"),
+    responses=ERRORS(s404="no such map"),
 )
-def list_versions(map_id: int, rt: RuntimeDep) -> VersionList:
+def list_versions(
+    map_id: DbId,
+    rt: RuntimeDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> VersionPage:
     chain = rt.maps.lineage(map_id)
     if not chain:
         raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
-    return VersionList(items=[version_out(i) for i in chain])
+    active = active_map_id(rt)
+    items = [map_out(i, active) for i in chain[offset : offset + limit]]
+    return VersionPage(total=len(chain), limit=limit, offset=offset, items=items)

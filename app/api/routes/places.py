@@ -9,12 +9,14 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal
 
-from fastapi import APIRouter, Depends, Response
-from pydantic import BaseModel, Field
+from fastapi import APIRouter, Depends, Query, Response
+from pydantic import Field
 
 from app.api.deps import ActorDep, RuntimeDep, StrictModel
-from app.api.problems import ProblemError, problem_responses
-from app.api.routes.missions import MissionOut, MissionsDep, PoseIn, PoseOut, mission_out, start_mission
+from app.api.problems import ProblemError
+from app.api.routes.maps import active_map_id
+from app.api.routes.missions import MissionOut, MissionsDep, PoseIn, mission_out, start_mission
+from app.api.schemas import ERRORS, DbId, Out, Page, Pose
 from app.place_store import Place, PlaceExists, PlaceStore
 from nav.types import Pose2D
 
@@ -32,16 +34,17 @@ class PlaceIn(StrictModel):
     theta: float = Field(0.0, description="rad")
 
 
-class PlaceOut(BaseModel):
+class PlaceOut(Out):
     id: int
     map_id: int
     name: str
-    pose: PoseOut
+    pose: Pose
 
 
-class PlaceList(BaseModel):
+class PlacePage(Page[PlaceOut]):
+    """A map's places, by name."""
+
     map_id: int
-    items: list[PlaceOut]
 
 
 class RouteIn(StrictModel):
@@ -61,13 +64,8 @@ PlacesDep = Annotated[PlaceStore, Depends(get_places)]
 
 def place_out(p: Place) -> PlaceOut:
     return PlaceOut(
-        id=p.id, map_id=p.map_id, name=p.name, pose=PoseOut(x=p.pose.x, y=p.pose.y, theta=p.pose.theta)
+        id=p.id, map_id=p.map_id, name=p.name, pose=Pose(x=p.pose.x, y=p.pose.y, theta=p.pose.theta)
     )
-
-
-def active_map_id(rt: Any) -> int | None:
-    loc = rt.features.get("localization")
-    return getattr(loc, "map_id", None) if loc is not None else getattr(rt, "active_map_id", None)
 
 
 def resolve_place(rt: Any, name: str) -> Pose2D:
@@ -85,14 +83,22 @@ def resolve_place(rt: Any, name: str) -> Pose2D:
 
 @router.get(
     "/api/maps/{map_id}/places",
-    response_model=PlaceList,
+    response_model=PlacePage,
     summary="The places of a map, by name",
-    responses=problem_responses(s404="no such map"),
+    responses=ERRORS(s404="no such map"),
 )
-def list_places(map_id: int, rt: RuntimeDep, places: PlacesDep) -> PlaceList:
+def list_places(
+    map_id: DbId,
+    rt: RuntimeDep,
+    places: PlacesDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> PlacePage:
     if rt.maps.info(map_id) is None:
         raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
-    return PlaceList(map_id=map_id, items=[place_out(p) for p in places.for_map(map_id)])
+    found = places.for_map(map_id)
+    items = [place_out(p) for p in found[offset : offset + limit]]
+    return PlacePage(total=len(found), limit=limit, offset=offset, items=items, map_id=map_id)
 
 
 @router.post(
@@ -100,7 +106,7 @@ def list_places(map_id: int, rt: RuntimeDep, places: PlacesDep) -> PlaceList:
     status_code=201,
     response_model=PlaceOut,
     summary="Name a pose on a map",
-    responses=problem_responses(
+    responses=ERRORS(
         s404="no such map", s409="the map already has a place of that name", s422="the pose is off the map"
     ),
 )
@@ -126,9 +132,9 @@ def create_place(
     "/api/places/{place_id}",
     status_code=204,
     summary="Delete a place",
-    responses=problem_responses(s404="no such place"),
+    responses=ERRORS(s404="no such place"),
 )
-def delete_place(place_id: int, places: PlacesDep) -> Response:
+def delete_place(place_id: DbId, places: PlacesDep) -> Response:
     if not places.delete(place_id):
         raise ProblemError(404, f"no place with id {place_id}", kind="not-found")
     return Response(status_code=204)
@@ -141,7 +147,7 @@ def delete_place(place_id: int, places: PlacesDep) -> Response:
     summary="Run a route: places (by name) and poses in order, `repeat` times, as one mission",
     description="Each leg is a goal of the mission with its own state and reason "
     "(`GET /api/missions/{id}`); cancel it like any mission.",
-    responses=problem_responses(
+    responses=ERRORS(
         s409="navigation cannot run now (not localized, e-stop, mode)",
         s422="an unknown place name, a stop off the map or in an obstacle",
     ),

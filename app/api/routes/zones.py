@@ -7,14 +7,14 @@ edges, no area or a vertex off the map is refused with 422 (``invalid-polygon``,
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from typing import Annotated
 
-from fastapi import APIRouter, Depends, Response
-from pydantic import BaseModel, Field, model_validator
+from fastapi import APIRouter, Depends, Query, Response
+from pydantic import Field, model_validator
 
 from app.api.deps import RuntimeDep, StrictModel
-from app.api.problems import ProblemError, problem_responses
+from app.api.problems import ProblemError
+from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp
 from app.features.zones import Zones
 from app.zone_store import SpeedUnit, Zone, ZoneKind, ZoneSpec
 from nav.costmap.filter_layer import MAX_VERTICES, PolygonError, validate_polygon
@@ -28,7 +28,7 @@ class ZoneIn(StrictModel):
 
     name: str = Field(min_length=1, max_length=100, pattern=r"\S")
     kind: ZoneKind
-    polygon: list[tuple[float, float]] = Field(
+    polygon: list[Pair] = Field(
         max_length=MAX_VERTICES + 1, description="[[x, y], ...] in the map frame (m), 3 or more vertices"
     )
     speed_limit: float | None = Field(
@@ -48,21 +48,22 @@ class ZoneIn(StrictModel):
         return self
 
 
-class ZoneOut(BaseModel):
+class ZoneOut(Out):
     id: int
     map_id: int
     name: str
     kind: ZoneKind
-    polygon: list[tuple[float, float]] = Field(description="[[x, y], ...] in the map frame (m)")
-    speed_limit: float | None
+    polygon: list[Pair] = Field(description="[[x, y], ...] in the map frame (m)")
+    speed_limit: float | None = Field(description="speed zones: in `speed_limit_unit`")
     speed_limit_unit: SpeedUnit
-    created_at: datetime = Field(description="ISO 8601 UTC")
-    updated_at: datetime = Field(description="ISO 8601 UTC")
+    created_at: Timestamp
+    updated_at: Timestamp
 
 
-class ZoneList(BaseModel):
+class ZonePage(Page[ZoneOut]):
+    """A map's zones, oldest first."""
+
     map_id: int
-    items: list[ZoneOut]
 
 
 def get_zones(rt: RuntimeDep) -> Zones:
@@ -74,13 +75,9 @@ def get_zones(rt: RuntimeDep) -> Zones:
 
 ZonesDep = Annotated[Zones, Depends(get_zones)]
 
-NO_MAP = problem_responses(s404="no such map")
-NO_ZONE = problem_responses(s404="no such zone")
-INVALID = problem_responses(s422="invalid polygon (fewer than 3 vertices, self-intersecting, off the map)")
-
-
-def _utc(t: datetime) -> datetime:
-    return t if t.tzinfo is not None else t.replace(tzinfo=UTC)  # SQLite returns naive UTC
+NO_MAP = ERRORS(s404="no such map")
+NO_ZONE = ERRORS(s404="no such zone")
+INVALID = ERRORS(s422="invalid polygon (fewer than 3 vertices, self-intersecting, off the map)")
 
 
 def zone_out(z: Zone) -> ZoneOut:
@@ -89,11 +86,11 @@ def zone_out(z: Zone) -> ZoneOut:
         map_id=z.map_id,
         name=z.name,
         kind=z.kind,
-        polygon=list(z.polygon),
+        polygon=[list(p) for p in z.polygon],
         speed_limit=z.speed_limit,
         speed_limit_unit=z.speed_limit_unit,
-        created_at=_utc(z.created_at),
-        updated_at=_utc(z.updated_at),
+        created_at=z.created_at,
+        updated_at=z.updated_at,
     )
 
 
@@ -117,12 +114,20 @@ def _zone(zones: Zones, zone_id: int) -> Zone:
 
 
 @router.get(
-    "/api/maps/{map_id}/zones", response_model=ZoneList, summary="The zones of a map", responses=NO_MAP
+    "/api/maps/{map_id}/zones", response_model=ZonePage, summary="The zones of a map", responses=NO_MAP
 )
-def list_zones(map_id: int, rt: RuntimeDep, zones: ZonesDep) -> ZoneList:
+def list_zones(
+    map_id: DbId,
+    rt: RuntimeDep,
+    zones: ZonesDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> ZonePage:
     if rt.maps.info(map_id) is None:
         raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
-    return ZoneList(map_id=map_id, items=[zone_out(z) for z in zones.store.for_map(map_id)])
+    found = zones.store.for_map(map_id)
+    items = [zone_out(z) for z in found[offset : offset + limit]]
+    return ZonePage(total=len(found), limit=limit, offset=offset, items=items, map_id=map_id)
 
 
 @router.post(
@@ -132,7 +137,7 @@ def list_zones(map_id: int, rt: RuntimeDep, zones: ZonesDep) -> ZoneList:
     summary="Draw a keepout or speed zone on a map",
     responses={**NO_MAP, **INVALID},
 )
-def create_zone(map_id: int, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep, response: Response) -> ZoneOut:
+def create_zone(map_id: DbId, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep, response: Response) -> ZoneOut:
     z = zones.store.add(map_id, _spec(rt, map_id, body))
     zones.reload(map_id)
     response.headers["Location"] = f"/api/zones/{z.id}"
@@ -140,7 +145,7 @@ def create_zone(map_id: int, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep, resp
 
 
 @router.get("/api/zones/{zone_id}", response_model=ZoneOut, summary="One zone", responses=NO_ZONE)
-def get_zone(zone_id: int, zones: ZonesDep) -> ZoneOut:
+def get_zone(zone_id: DbId, zones: ZonesDep) -> ZoneOut:
     return zone_out(_zone(zones, zone_id))
 
 
@@ -150,7 +155,7 @@ def get_zone(zone_id: int, zones: ZonesDep) -> ZoneOut:
     summary="Replace a zone (name, kind, polygon, limit)",
     responses={**NO_ZONE, **INVALID},
 )
-def replace_zone(zone_id: int, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep) -> ZoneOut:
+def replace_zone(zone_id: DbId, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep) -> ZoneOut:
     old = _zone(zones, zone_id)
     z = zones.store.replace(zone_id, _spec(rt, old.map_id, body))
     if z is None:
@@ -160,7 +165,7 @@ def replace_zone(zone_id: int, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep) ->
 
 
 @router.delete("/api/zones/{zone_id}", status_code=204, summary="Delete a zone", responses=NO_ZONE)
-def delete_zone(zone_id: int, zones: ZonesDep) -> Response:
+def delete_zone(zone_id: DbId, zones: ZonesDep) -> Response:
     z = zones.store.delete(zone_id)
     if z is None:
         raise ProblemError(404, f"no zone with id {zone_id}", kind="not-found")
