@@ -92,3 +92,36 @@ def test_draw_wall_and_zone_save_a_version(browser, server: EmbeddedServer) -> N
     finally:
         ctx.close()
         api.close()
+
+
+def test_go_to_a_place_from_the_live_page(browser, server: EmbeddedServer) -> None:
+    api = httpx.Client(base_url=server.url, timeout=10.0)
+    map_id = api.get("/api/maps?limit=1").json()["active_map_id"]
+    r = api.post(f"/api/maps/{map_id}/places", json={"name": "sofa", "x": 1.5, "y": 3.5, "theta": 3.14})
+    assert r.status_code == 201
+    assert (
+        api.post("/api/localization/initial_pose", json={"x": 3.0, "y": 3.5, "theta": 0.0}).status_code == 200
+    )
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)
+    ctx.set_default_timeout(LONG)
+    page = ctx.new_page()
+    try:
+        page.goto(server.url + "/")
+        # the page's operator takes control (the test's API client held it) and localizes
+        take = page.request.post(server.url + "/api/control/acquire", data={"take_over": True})
+        assert take.ok, take.text()
+        r = page.request.post(server.url + "/api/localization/initial_pose", data={"x": 3.0, "y": 3.5})
+        assert r.ok, r.text()
+        page.wait_for_selector("#place-select option[value='sofa']", state="attached")
+        page.select_option("#place-select", "sofa")
+        page.get_by_role("button", name="Go to the chosen place").click()
+        deadline = time.monotonic() + 20
+        goals = []
+        while not goals and time.monotonic() < deadline:
+            page.wait_for_timeout(100)
+            goals = api.get("/api/navigation").json()["goals"]
+        assert goals and goals[0]["x"] == 1.5 and goals[0]["y"] == 3.5
+    finally:
+        api.post("/api/navigation/cancel")
+        ctx.close()
+        api.close()
