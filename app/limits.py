@@ -8,6 +8,7 @@ operator sees why the robot is slower than asked.
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass
 
 from nav.types import Twist2D
 from robot.profiles import Limits
@@ -115,3 +116,25 @@ def ramp_duration(target: Twist2D, current: Twist2D, limits: Limits) -> float:
         ),
         default=0.0,
     )
+
+
+@dataclass(frozen=True)
+class SpeedLimit:
+    """A linear speed limit in force (a speed zone, Nav2 SpeedFilter) and why, for telemetry."""
+
+    linear: float
+    """m/s, >= 0: the largest |linear velocity| allowed."""
+    reason: str
+    """What imposes it, for the operator (e.g. ``speed zone 'aisle': 30 % of 0.50 m/s``)."""
+
+
+def apply_speed_limit(cmd: Twist2D, limit: SpeedLimit | None) -> tuple[Twist2D, bool]:
+    """Scale the whole command so its linear speed is within ``limit`` (True when it was scaled).
+    Linear and angular parts scale together so the commanded arc (the path's curvature) is kept."""
+    if limit is None:
+        return cmd, False
+    speed = math.hypot(cmd.vx, cmd.vy)
+    if speed <= limit.linear:
+        return cmd, False
+    k = limit.linear / speed
+    return Twist2D(cmd.vx * k, cmd.vy * k, cmd.wz * k), True

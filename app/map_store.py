@@ -31,6 +31,8 @@ class MapInfo:
     run_id: int | None
     created_at: datetime
     updated_at: datetime
+    parent_id: int | None = None
+    version: int = 1
 
     def as_dict(self) -> dict:
         return {
@@ -48,6 +50,8 @@ class MapInfo:
             "created_at": self.created_at.isoformat(),
             "updated_at": self.updated_at.isoformat(),
             "thumbnail_url": f"/api/maps/{self.id}/thumbnail.png",
+            "parent_id": self.parent_id,
+            "version": self.version,
         }
 
 
@@ -66,6 +70,8 @@ def _info(rec: MapRecord) -> MapInfo:
         rec.run_id,
         rec.created_at,
         rec.updated_at,
+        rec.parent_id,
+        rec.version,
     )
 
 
@@ -90,6 +96,8 @@ class MapStore:
         is_stock: bool = False,
         robot_id: int | None = None,
         run_id: int | None = None,
+        parent_id: int | None = None,
+        version: int = 1,
     ) -> MapInfo:
         """Store a map in one transaction (all or nothing)."""
         g = grid.geometry
@@ -107,12 +115,45 @@ class MapStore:
             is_stock=is_stock,
             robot_id=robot_id,
             run_id=run_id,
+            parent_id=parent_id,
+            version=version,
         )
         with Session(self.engine, expire_on_commit=False) as s:
             s.add(rec)
             s.commit()
             s.refresh(rec)
         return _info(rec)
+
+    def add_version(self, parent: MapInfo, grid: OccupancyGrid) -> MapInfo:
+        """Save an edited map as a new version of ``parent``, named after the original with its
+        version number (``office v2``; names stay unique); the parent stays as it is."""
+        if grid.geometry != self.grid_geometry(parent.id):
+            raise ValueError("a new version keeps the map's geometry")
+        original = self.lineage(parent.id)[0]
+        return self.add(
+            self.free_name(f"{original.name} v{parent.version + 1}"),
+            grid,
+            source="edit",
+            robot_id=parent.robot_id,
+            run_id=parent.run_id,
+            parent_id=parent.id,
+            version=parent.version + 1,
+        )
+
+    def lineage(self, map_id: int) -> list[MapInfo]:
+        """The versions ``map_id`` descends from, oldest (the original) first, ending with it."""
+        chain: list[MapInfo] = []
+        info = self.info(map_id)
+        while info is not None and len(chain) < 10_000:
+            chain.append(info)
+            info = self.info(info.parent_id) if info.parent_id is not None else None
+        return chain[::-1]
+
+    def grid_geometry(self, map_id: int) -> GridGeometry | None:
+        info = self.info(map_id)
+        if info is None:
+            return None
+        return GridGeometry(info.resolution, info.width, info.height, Pose2D(*info.origin))
 
     def list(self) -> list[MapInfo]:
         with Session(self.engine) as s:

@@ -56,6 +56,10 @@ class MapRecord(SQLModel, table=True):
     run_id: int | None = Field(default=None, index=True)
     created_at: datetime = Field(default_factory=utcnow)
     updated_at: datetime = Field(default_factory=utcnow)
+    # Versions (migration 0007): an edit saves a new row; ``parent_id`` is the version it was made
+    # from (None for an original), ``version`` counts from 1 along the chain.
+    parent_id: int | None = Field(default=None, index=True)
+    version: int = 1
 
 
 class Run(SQLModel, table=True):
@@ -192,3 +196,36 @@ class UserSession(SQLModel, table=True):
     user_id: int = Field(foreign_key="users.id", index=True)
     created_at: datetime = Field(default_factory=utcnow)
     expires_at: datetime = Field(index=True)
+
+
+# ---------------------------------------------------------------------------------------------- zones
+# Keepout and speed zones of a map (migration 0005, app/zone_store.py): polygons in the map frame.
+
+
+class ZoneRecord(SQLModel, table=True):
+    """A keepout or speed-limit polygon drawn on one map (version); deleted with its map."""
+
+    __tablename__ = "zones"
+    id: int | None = Field(default=None, primary_key=True)
+    map_id: int = Field(foreign_key="maps.id", index=True, ondelete="CASCADE")
+    name: str = Field(max_length=100)
+    kind: str = Field(max_length=20)  # keepout | speed
+    polygon: list[list[float]] = Field(sa_column=Column(JSON, nullable=False))  # [[x, y], ...] metres
+    speed_limit: float | None = None  # speed zones: percent of the profile's max, or m/s
+    speed_limit_unit: str = Field(default="percent", max_length=10)  # percent | m/s
+    created_at: datetime = Field(default_factory=utcnow)
+    updated_at: datetime = Field(default_factory=utcnow)
+
+
+class PlaceRecord(SQLModel, table=True):
+    """A named pose on one map ("dock", "bed 3"): a goal by name (migration 0006)."""
+
+    __tablename__ = "places"
+    __table_args__ = (Index("uq_places_map_name", "map_id", "name", unique=True),)
+    id: int | None = Field(default=None, primary_key=True)
+    map_id: int = Field(foreign_key="maps.id", index=True, ondelete="CASCADE")
+    name: str = Field(max_length=100)
+    x: float
+    y: float
+    theta: float = 0.0
+    created_at: datetime = Field(default_factory=utcnow)

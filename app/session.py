@@ -25,7 +25,15 @@ import numpy as np
 
 from app.bus import Snapshot, SnapshotBus
 from app.fault_monitor import FaultMonitor, FaultMonitorOptions
-from app.limits import CommandRefused, clamp_speed, limit_acceleration, ramp_duration, sanity_check
+from app.limits import (
+    CommandRefused,
+    SpeedLimit,
+    apply_speed_limit,
+    clamp_speed,
+    limit_acceleration,
+    ramp_duration,
+    sanity_check,
+)
 from app.modes import LIDAR_MODES, Mode, ModeMachine, no_lidar_reason
 from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
@@ -183,6 +191,8 @@ class Session:
         self.safety: SafetyFilter | None = None
         self._last_frame: SensorFrame | None = None
         self.safety_stop: str | None = None
+        # A speed zone's limit where the robot is (set by the zones stage each tick), for every mode
+        self.speed_limit: SpeedLimit | None = None
         # Workers are started from the loop thread: back to the process's priority, not the loop's.
         self.workers = ThreadPoolExecutor(
             max_workers=2, thread_name_prefix="worker", initializer=_process_priority_for_this_thread
@@ -487,6 +497,9 @@ class Session:
         dt = self.period if self.clock.is_virtual else min(max(now - self._last_send_t, 1e-3), self.period)
         self._last_send_t = now
         limited, clamped = clamp_speed(cmd, self.profile.limits, self.profile.is_omni)
+        limited, zoned = apply_speed_limit(limited, self.speed_limit)
+        if zoned:
+            clamped = (*clamped, "speed_limit")
         limited = limit_acceleration(limited, self.last_command, self.profile.limits, dt)
         if self.safety is not None and self._last_frame is not None:
             # after the ramp: a safety stop is immediate, never smoothed away

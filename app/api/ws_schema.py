@@ -46,6 +46,29 @@ class ContactMsg(Out):
     free: list[str] | None = Field(description="elementary motions with room: forward, back, turn left...")
 
 
+class ZoneRef(Out):
+    zone_id: int
+    name: str
+    kind: Literal["keepout", "speed"]
+    speed_limit: float | None = None
+    speed_limit_unit: Literal["percent", "m/s"] | None = None
+
+
+class SpeedLimitMsg(Out):
+    linear: float = Field(description="m/s: the largest linear speed allowed now")
+    reason: str = Field(description="which zone sets it, for the operator")
+    zone_id: int | None
+
+
+class ZonesMsg(Out):
+    """The active map's zones at work (issue 19): the zones the robot is in, the speed limit."""
+
+    map_id: int | None
+    count: int = Field(description="zones on the active map")
+    inside: list[ZoneRef]
+    speed_limit: SpeedLimitMsg | None = Field(description="a speed zone's limit in force (or just ahead)")
+
+
 class Notice(OpenOut):
     """An operator event (a refusal or a notice) meant for this dashboard tab."""
 
@@ -81,6 +104,7 @@ class TelemetryMessage(Out):
         None, description="frontier exploration, when that feature runs (`GET /api/exploration`'s shape)"
     )
     contact: ContactMsg | None = None
+    zones: ZonesMsg | None = None
     scan: ScanMsg | None = None
     control: ControlState
     notices: list[Notice]

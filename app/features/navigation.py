@@ -40,6 +40,7 @@ from nav.types import (
     NO_INFORMATION,
     ZERO_TWIST,
     Costmap,
+    GridGeometry,
     OccupancyGrid,
     Path,
     Pose2D,
@@ -331,6 +332,9 @@ class Navigation:
         self._local = None
         self._local_cm: Costmap | None = None
         self._costmap_version = 0
+        # keepout filter mask (bool over its geometry: the active map's), from the zones feature; set
+        # at once for goal checks, applied to the costmaps by the loop (a "keepout" pending item)
+        self._keepout: tuple[np.ndarray, GridGeometry] | None = None
         self._last_global_update = -math.inf
         # walkers in the map frame, for a controller that predicts them (TEB's dynamic obstacles)
         self.walkers = WalkerTracker()
@@ -443,6 +447,34 @@ class Navigation:
         self._local_cm = self._local.costmap()
         self._costmap_version += 1
 
+    def set_keepout(self, mask: np.ndarray | None, geometry: GridGeometry) -> None:
+        """Keepout filter over the active map (any thread; applied at the next tick): planners never
+        route through the true cells of ``mask`` and the controller never enters them. Goals inside
+        are refused from now on."""
+        keepout = None if mask is None else (mask, geometry)
+        with self._lock:
+            self._keepout = keepout
+            self._pending.append(("keepout", keepout))
+
+    def _apply_keepout(self, keepout: tuple[np.ndarray, GridGeometry] | None) -> None:
+        if self._global is None or self._local is None:
+            return
+        mask, geo = keepout if keepout is not None else (None, None)
+        self._global.set_keepout(mask, geo)
+        self._local.set_keepout(mask, geo)
+        self._global_cm = self._global.costmap()
+        self._local_cm = self._local.costmap()
+        self._costmap_version += 1
+
+    def in_keepout(self, x: float, y: float) -> bool:
+        """Is the map point inside the keepout filter mask?"""
+        keepout = self._keepout
+        if keepout is None:
+            return False
+        mask, geo = keepout
+        rows, cols = geo.world_to_cell(np.array([x, y]))
+        return bool(geo.in_bounds(rows, cols)[0] and mask[rows[0], cols[0]])
+
     def _on_map(self, grid: OccupancyGrid, map_id: int | None) -> None:
         with self._lock:
             self._pending.append(("map", grid))
@@ -480,6 +512,8 @@ class Navigation:
                 goal.theta,
             )
             raise GoalRejected("off the map", goal, nearest_free_pose(cm, inside, r), index)
+        if self.in_keepout(goal.x, goal.y):
+            raise GoalRejected("inside a keepout zone", goal, nearest_free_pose(cm, goal, r), index)
         cost = int(cm.costs[rows[0], cols[0]])
         reason = {
             LETHAL_OBSTACLE: "inside an obstacle",
@@ -633,6 +667,8 @@ class Navigation:
                 self._cause = StopCause(StopReason.MAP_CHANGED, "operator", "active map changed")
                 self._abort("active map changed", now)
                 self._build_costmaps(arg)
+            elif kind == "keepout":
+                self._apply_keepout(arg)
             elif kind == "goals":
                 goals, controller, rid, actor, extends = arg
                 req = self._request

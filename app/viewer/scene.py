@@ -77,9 +77,13 @@ LAYERS: dict[str, str] = {
     "People": "/people",
     "Recoveries": "/recoveries",
     "TEB band": "/plan/teb",
+    "Zones": "/zones",
 }
 
 MAX_RECOVERY_LABELS = 24
+MAX_ZONE_LABELS = 64
+"""Zones beyond this many keep their outline but get no label."""
+ZONE_KINDS = {"keepout": palette.KEEPOUT_ZONE, "speed": palette.SPEED_ZONE}
 """Recovery markers beyond this many (in one navigation) keep their marker but get no label."""
 
 
@@ -333,6 +337,10 @@ class Viewer:
         h["/plan/teb/band"].visible = True
         h["/plan/teb/poses"] = self._lines("/plan/teb/poses", palette.TEB_BAND, 2.0)  # arrows as lines
         h["/plan/teb/poses"].visible = True
+        h["/zones"] = s.add_frame("/zones", show_axes=False, visible=False)
+        for kind, rgb in ZONE_KINDS.items():  # one node per kind: a colour set once, never re-sent
+            h[f"/zones/{kind}"] = self._lines(f"/zones/{kind}", rgb, 3.0)
+            h[f"/zones/{kind}"].visible = True  # the parent frame's visibility toggles the layer
         h["/graph"] = s.add_frame("/graph", show_axes=False)
         h["/graph/edges"] = self._lines("/graph/edges", palette.GRAPH_EDGES, 2.0)
         h["/input/preview"] = s.add_arrows(
@@ -578,6 +586,11 @@ class Viewer:
             last["recoveries"] = marks
             self._draw_recoveries(marks)
 
+        zones = snap.extras.get("zone_layer")  # ((kind, label, (K, 2) vertices), ...)
+        if zones is not last.get("zones"):
+            last["zones"] = zones
+            self._draw_zones(zones or ())
+
         band = snap.extras.get("teb_band")  # (N, 3) TEB poses, map frame
         if band is not last.get("teb_band"):
             last["teb_band"] = band
@@ -658,6 +671,34 @@ class Viewer:
             else:
                 break
         self._set_data("/recoveries", bool(rows))
+
+    def _draw_zones(self, zones: Any) -> None:
+        """Keepout (red) and speed (amber) zone outlines just above the map, each labelled."""
+        h = self._h
+        with self.server.atomic():
+            for kind in ZONE_KINDS:
+                rings = [np.vstack((v, v[:1])) for k, _label, v in zones if k == kind]
+                segs = [geo.polyline_segments(r, 0.03) for r in rings]
+                h[f"/zones/{kind}"].points = np.concatenate(segs) if segs else np.zeros((0, 2, 3), np.float32)
+        for i in range(MAX_ZONE_LABELS):
+            name = f"/zones/label_{i}"
+            if i < len(zones):
+                _kind, text, v = zones[i]
+                x, y = (float(c) for c in np.asarray(v).mean(axis=0))
+                if name not in h:
+                    h[name] = self.server.scene.add_label(
+                        name, text, position=(x, y, 0.1), anchor="center-center"
+                    )
+                else:
+                    with self.server.atomic():
+                        h[name].text = text
+                        h[name].position = (x, y, 0.1)
+                        h[name].visible = True
+            elif name in h:
+                h[name].visible = False
+            else:
+                break
+        self._set_data("/zones", bool(zones))
 
     def _apply_local_plan(self, snap: Snapshot) -> None:
         h, last = self._h, self._last

@@ -1,14 +1,15 @@
 // Goals and waypoints: the navigator's queue (from telemetry) and a draft list sent as waypoints.
 import { $, api, fmt, message, onTelemetry, state } from "./core.js";
 
-const draft = [];
+const draft = []; // poses {x, y, theta}, or places {place, x, y, theta}
+let places = [];
 const pose = (g) => `x ${fmt(g.x)}  y ${fmt(g.y)}  θ ${fmt((g.theta * 180) / Math.PI, 0)}°`;
 
 function renderDraft() {
   const list = $("#draft-list");
   list.replaceChildren(...draft.map((g, i) => {
     const li = document.createElement("li");
-    li.textContent = pose(g);
+    li.textContent = g.place ? `${g.place} (${pose(g)})` : pose(g);
     const rm = document.createElement("button");
     rm.className = "btn small";
     rm.textContent = "✕";
@@ -70,12 +71,52 @@ export function init() {
   $("#goals-clear").addEventListener("click", () => { draft.length = 0; renderDraft(); });
   $("#goals-send").addEventListener("click", async () => {
     if (!draft.length) return;
+    const repeat = Math.max(1, Math.round(Number($("#route-repeat").value) || 1));
     try {
-      await api("POST", "/api/navigation/goals", draft.length === 1 ? draft[0] : draft);
-      message(`navigating through ${draft.length} waypoint${draft.length > 1 ? "s" : ""}`, "ok");
+      if (repeat > 1 || draft.some((g) => g.place)) {
+        // a route: places by name and poses, run `repeat` times as one mission (a goal per leg)
+        const stops = draft.map((g) => (g.place ? g.place : { x: g.x, y: g.y, theta: g.theta }));
+        await api("POST", "/api/routes/run", { stops, repeat });
+      } else {
+        await api("POST", "/api/navigation/goals", draft.length === 1 ? draft[0] : draft);
+      }
+      message(`navigating through ${draft.length} waypoint${draft.length > 1 ? "s" : ""}${repeat > 1 ? ` × ${repeat}` : ""}`, "ok");
       draft.length = 0;
       renderDraft();
     } catch { /* the refusal (409/422 with its reason) is in Messages */ }
   });
+  $("#place-select").addEventListener("focus", loadPlaces);
+  $("#place-go").addEventListener("click", async () => {
+    const name = $("#place-select").value;
+    if (!name) { message("choose a place first", "error"); return; }
+    try {
+      await api("POST", "/api/navigation/goals", { place: name });
+      message(`navigating to "${name}"`, "ok");
+    } catch { /* refusal shown in Messages */ }
+  });
+  $("#place-add").addEventListener("click", () => {
+    const p = places.find((q) => q.name === $("#place-select").value);
+    if (!p) { message("choose a place first", "error"); return; }
+    draft.push({ place: p.name, ...p.pose });
+    renderDraft();
+  });
   renderDraft();
+  loadPlaces();
+}
+
+// The active map's places (named poses, drawn on the Maps page's editor)
+async function loadPlaces() {
+  try {
+    const maps = await api("GET", "/api/maps?limit=1");
+    if (maps.active_map_id == null) return;
+    places = (await api("GET", `/api/maps/${maps.active_map_id}/places?limit=500`)).items;
+  } catch { return; }
+  const sel = $("#place-select");
+  const keep = sel.value;
+  const opts = places.map((p) => { const o = document.createElement("option"); o.value = p.name; o.textContent = p.name; return o; });
+  const head = document.createElement("option");
+  head.value = "";
+  head.textContent = places.length ? "places…" : "no places on this map";
+  sel.replaceChildren(head, ...opts);
+  sel.value = places.some((p) => p.name === keep) ? keep : "";
 }

@@ -1,6 +1,7 @@
 // Maps page: gallery with thumbnails; open in the 3D view (activate), rename, delete, set active;
-// import a map_server YAML + image with upload progress; export as map.yaml + map.pgm.
+// import a map_server YAML + image with upload progress; export as map.yaml + map.pgm; edit (editor.js).
 import { $, api, loadMe, message, upload, wireEstop } from "./core.js";
+import { initEditor, openEditor } from "./editor.js";
 
 let activeId = null;
 
@@ -42,6 +43,7 @@ function card(m) {
   const h = document.createElement("h3");
   h.textContent = m.name;
   if (m.id === activeId || m.active) { const t = document.createElement("span"); t.className = "tag on"; t.textContent = "active"; h.append(" ", t); }
+  if (m.version > 1) { const t = document.createElement("span"); t.className = "tag"; t.textContent = `v${m.version}`; h.append(" ", t); }
   if (m.is_stock) { const t = document.createElement("span"); t.className = "tag"; t.textContent = "stock"; h.append(" ", t); }
   const meta = document.createElement("div");
   meta.className = "meta";
@@ -52,6 +54,7 @@ function card(m) {
   actions.append(
     button("Open in 3D", `open ${m.name} in the 3D view`, () => activate(m, true)),
     button("Set active", `make ${m.name} the active map`, () => activate(m, false)),
+    button("Edit", `edit ${m.name}: walls, erasing, zones, places`, () => openEditor(m, refresh)),
   );
   if (!m.is_stock) {
     actions.append(
@@ -113,6 +116,7 @@ async function init() {
   await loadMe();
   wireEstop();
   initImport();
+  initEditor()(refresh);
   await refresh();
 }
 

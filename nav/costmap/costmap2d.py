@@ -134,6 +134,9 @@ class Costmap2D:
         self.geometry = geometry
         self._static_full: np.ndarray | None = None
         self._static_geometry: GridGeometry | None = None
+        # keepout filter mask (bool, its own geometry: the map's), applied under inflation
+        self._keepout: np.ndarray | None = None
+        self._keepout_geometry: GridGeometry | None = None
         if o.use_static_layer and static_map is not None:
             self._static_full = static_costs(
                 static_map, o.static_layer, track_unknown_space=o.track_unknown_space
@@ -191,6 +194,11 @@ class Costmap2D:
         return Pose2D(ox, oy, 0.0)
 
     def _static_window(self) -> np.ndarray:
+        base = self._static_only()
+        keep = self._keepout_window()
+        return base if keep is None else np.where(keep, np.uint8(LETHAL_OBSTACLE), base)
+
+    def _static_only(self) -> np.ndarray:
         geo = self.geometry
         if self._static_full is None or self._static_geometry is None:
             fill = NO_INFORMATION if self.options.track_unknown_space else FREE_SPACE
@@ -198,6 +206,56 @@ class Costmap2D:
         if self._static_geometry == geo:
             return self._static_full
         return sample_costs(self._static_full, self._static_geometry, geo)
+
+    def _keepout_window(self) -> np.ndarray | None:
+        if self._keepout is None or self._keepout_geometry is None:
+            return None
+        if self._keepout_geometry == self.geometry:
+            return self._keepout
+        return sample_costs(self._keepout.view(np.uint8), self._keepout_geometry, self.geometry) == 1
+
+    def update_static(self, grid: OccupancyGrid, bounds: tuple[int, int, int, int] | None = None) -> None:
+        """A new version of the static map with the same geometry (an edit): only the cells in
+        ``bounds`` (r0, r1, c0, c1; default all) are re-interpreted, and only around them re-inflated."""
+        if self._static_full is None or self._static_geometry != grid.geometry:
+            raise CostmapError("update_static needs a static layer built from a map of the same geometry")
+        g = grid.geometry
+        r0, r1, c0, c1 = bounds or (0, g.height, 0, g.width)
+        block = OccupancyGrid(GridGeometry(g.resolution, c1 - c0, r1 - r0, g.origin), grid.data[r0:r1, c0:c1])
+        self._static_full = self._static_full.copy()  # snapshots taken before keep the old map
+        self._static_full[r0:r1, c0:c1] = static_costs(
+            block, self.options.static_layer, track_unknown_space=self.options.track_unknown_space
+        )
+        self._base = self._static_window()
+        if self._static_geometry == self.geometry:
+            self._dirty = _union(self._dirty, (r0, r1, c0, c1))
+        else:  # a rolling window: its sampled copy was rebuilt, refresh it all
+            self._dirty = (0, self.geometry.height, 0, self.geometry.width)
+
+    def set_keepout(self, mask: np.ndarray | None, geometry: GridGeometry | None = None) -> None:
+        """Keepout filter (Nav2 ``KeepoutFilter``): cells where the (H, W) bool ``mask`` (over
+        ``geometry``, default this costmap's) is true are lethal; None removes it. Unlike Nav2, which
+        writes the mask after inflation (only the robot's centre is kept out), it is applied under
+        inflation like a wall, so the whole footprint stays out. Only the changed region is
+        re-inflated."""
+        geo = geometry or self.geometry
+        if mask is not None and mask.shape != (geo.height, geo.width):
+            raise CostmapError(
+                f"keepout mask {mask.shape} does not match its geometry {geo.height}x{geo.width}"
+            )
+        old = self._keepout_window()
+        self._keepout = None if mask is None else np.ascontiguousarray(mask, dtype=bool)
+        self._keepout_geometry = None if mask is None else geo
+        new = self._keepout_window()
+        self._base = self._static_window()
+        if old is None and new is None:
+            return
+        changed = new if old is None else old if new is None else old ^ new
+        rows = np.flatnonzero(changed.any(axis=1))
+        if rows.size == 0:
+            return
+        cols = np.flatnonzero(changed[rows[0] : rows[-1] + 1].any(axis=0))
+        self._dirty = _union(self._dirty, (int(rows[0]), int(rows[-1]) + 1, int(cols[0]), int(cols[-1]) + 1))
 
     # ----------------------------------------------------------------- updates
     def update(

@@ -45,6 +45,8 @@ class MapOut(Out):
     updated_at: Timestamp
     thumbnail_url: str
     active: bool = Field(description="true for the map the robot localizes and plans in now")
+    parent_id: int | None = Field(description="the version this map was edited from (None: an original)")
+    version: int = Field(description="1 for an original, +1 per edit (`POST /api/maps/{id}/versions`)")
 
 
 class MapPage(Page[MapOut]):

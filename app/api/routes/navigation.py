@@ -10,6 +10,7 @@ from pydantic import Field
 from app.api.deps import ActorDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError, problem_responses
 from app.api.routes.missions import MissionsDep, start_mission
+from app.api.routes.places import resolve_place
 from app.api.schemas import NavigationOut, public_navigation
 from app.features.missions import MissionEnded
 from app.features.navigation import Navigation
@@ -34,6 +35,13 @@ class GoalIn(StrictModel):
     allow_unknown: bool | None = None
     """Accept a goal in unknown space (None: the navigation option ``allow_unknown_goals``); in a
     list, any goal that sets it sets it for the whole request."""
+
+
+class PlaceGoalIn(StrictModel):
+    """A goal by name: a place of the active map (``GET /api/maps/{id}/places``)."""
+
+    place: str = Field(min_length=1, max_length=100)
+    controller: Literal["dwa", "teb"] | None = None
 
 
 def get_navigation_feature(rt: RuntimeDep) -> Navigation:
@@ -89,15 +97,23 @@ def get_navigation(nav: NavigationDep) -> NavigationOut:
             s409="not localized, e-stop, fault, the mode does not allow navigating, or another client "
             "holds control",
             s422="goal off the map, in an obstacle or its inscribed radius (`reason`, `index`, "
-            "`nearest_free`; a goal in unknown space names `allow_unknown`), or an unknown or "
+            "`nearest_free`; a goal in unknown space names `allow_unknown`), an unknown place name "
+            "(`places`: the known ones), or an unknown or "
             "conflicting controller",
         ),
         **UNAVAILABLE,
     },
 )
 def post_goals(
-    body: GoalIn | list[GoalIn], nav: NavigationDep, missions: MissionsDep, actor: ActorDep
+    body: GoalIn | PlaceGoalIn | list[GoalIn],
+    rt: RuntimeDep,
+    nav: NavigationDep,
+    missions: MissionsDep,
+    actor: ActorDep,
 ) -> GoalsOut:
+    if isinstance(body, PlaceGoalIn):
+        pose = resolve_place(rt, body.place)
+        body = GoalIn(x=pose.x, y=pose.y, theta=pose.theta, controller=body.controller)
     goals = body if isinstance(body, list) else [body]
     named = {g.controller for g in goals if g.controller is not None}
     if len(named) > 1:

@@ -1,0 +1,173 @@
+"""Keepout and speed zones of a map: list, create, read, replace, delete (issue 19).
+
+Polygons are in the map frame (metres). A polygon with fewer than 3 vertices, crossing or touching
+edges, no area or a vertex off the map is refused with 422 (``invalid-polygon``, the reason in
+``detail``). A change to the active map's zones takes effect at the next control tick.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated
+
+from fastapi import APIRouter, Depends, Query, Response
+from pydantic import Field, model_validator
+
+from app.api.deps import RuntimeDep, StrictModel
+from app.api.problems import ProblemError
+from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp
+from app.features.zones import Zones
+from app.zone_store import SpeedUnit, Zone, ZoneKind, ZoneSpec
+from nav.costmap.filter_layer import MAX_VERTICES, PolygonError, validate_polygon
+
+router = APIRouter(tags=["zones"])
+
+
+class ZoneIn(StrictModel):
+    """A zone: ``keepout`` (never entered, never planned through) or ``speed`` (a speed limit inside,
+    Nav2 SpeedFilter: ``speed_limit`` in percent of the robot's top speed, or m/s)."""
+
+    name: str = Field(min_length=1, max_length=100, pattern=r"\S")
+    kind: ZoneKind
+    polygon: list[Pair] = Field(
+        max_length=MAX_VERTICES + 1, description="[[x, y], ...] in the map frame (m), 3 or more vertices"
+    )
+    speed_limit: float | None = Field(
+        None, gt=0, description="speed zones: the limit, in `speed_limit_unit` (required for `speed`)"
+    )
+    speed_limit_unit: SpeedUnit = SpeedUnit.PERCENT
+
+    @model_validator(mode="after")
+    def _speed_fields(self) -> ZoneIn:
+        if self.kind == ZoneKind.SPEED:
+            if self.speed_limit is None:
+                raise ValueError("a speed zone needs speed_limit")
+            if self.speed_limit_unit == SpeedUnit.PERCENT and self.speed_limit > 100:
+                raise ValueError("speed_limit in percent is at most 100")
+        elif self.speed_limit is not None:
+            raise ValueError("only speed zones have a speed_limit")
+        return self
+
+
+class ZoneOut(Out):
+    id: int
+    map_id: int
+    name: str
+    kind: ZoneKind
+    polygon: list[Pair] = Field(description="[[x, y], ...] in the map frame (m)")
+    speed_limit: float | None = Field(description="speed zones: in `speed_limit_unit`")
+    speed_limit_unit: SpeedUnit
+    created_at: Timestamp
+    updated_at: Timestamp
+
+
+class ZonePage(Page[ZoneOut]):
+    """A map's zones, oldest first."""
+
+    map_id: int
+
+
+def get_zones(rt: RuntimeDep) -> Zones:
+    z = rt.features.get("zones")
+    if z is None:
+        raise ProblemError(503, "zones are not running on this server", kind="zones-unavailable")
+    return z  # type: ignore[return-value]
+
+
+ZonesDep = Annotated[Zones, Depends(get_zones)]
+
+NO_MAP = ERRORS(s404="no such map")
+NO_ZONE = ERRORS(s404="no such zone")
+INVALID = ERRORS(s422="invalid polygon (fewer than 3 vertices, self-intersecting, off the map)")
+
+
+def zone_out(z: Zone) -> ZoneOut:
+    return ZoneOut(
+        id=z.id,
+        map_id=z.map_id,
+        name=z.name,
+        kind=z.kind,
+        polygon=[list(p) for p in z.polygon],
+        speed_limit=z.speed_limit,
+        speed_limit_unit=z.speed_limit_unit,
+        created_at=z.created_at,
+        updated_at=z.updated_at,
+    )
+
+
+def _spec(rt: RuntimeDep, map_id: int, body: ZoneIn) -> ZoneSpec:
+    """The zone as stored, after checking its polygon against the map's extent."""
+    grid = rt.maps.grid(map_id)
+    if grid is None:
+        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
+    try:
+        poly = validate_polygon(body.polygon, grid.geometry)
+    except PolygonError as exc:
+        raise ProblemError(422, str(exc), kind="invalid-polygon") from None
+    return ZoneSpec(body.name.strip(), body.kind, poly.tolist(), body.speed_limit, body.speed_limit_unit)
+
+
+def _zone(zones: Zones, zone_id: int) -> Zone:
+    z = zones.store.get(zone_id)
+    if z is None:
+        raise ProblemError(404, f"no zone with id {zone_id}", kind="not-found")
+    return z
+
+
+@router.get(
+    "/api/maps/{map_id}/zones", response_model=ZonePage, summary="The zones of a map", responses=NO_MAP
+)
+def list_zones(
+    map_id: DbId,
+    rt: RuntimeDep,
+    zones: ZonesDep,
+    limit: Annotated[int, Query(ge=1, le=500)] = 100,
+    offset: Annotated[int, Query(ge=0)] = 0,
+) -> ZonePage:
+    if rt.maps.info(map_id) is None:
+        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
+    found = zones.store.for_map(map_id)
+    items = [zone_out(z) for z in found[offset : offset + limit]]
+    return ZonePage(total=len(found), limit=limit, offset=offset, items=items, map_id=map_id)
+
+
+@router.post(
+    "/api/maps/{map_id}/zones",
+    status_code=201,
+    response_model=ZoneOut,
+    summary="Draw a keepout or speed zone on a map",
+    responses={**NO_MAP, **INVALID},
+)
+def create_zone(map_id: DbId, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep, response: Response) -> ZoneOut:
+    z = zones.store.add(map_id, _spec(rt, map_id, body))
+    zones.reload(map_id)
+    response.headers["Location"] = f"/api/zones/{z.id}"
+    return zone_out(z)
+
+
+@router.get("/api/zones/{zone_id}", response_model=ZoneOut, summary="One zone", responses=NO_ZONE)
+def get_zone(zone_id: DbId, zones: ZonesDep) -> ZoneOut:
+    return zone_out(_zone(zones, zone_id))
+
+
+@router.put(
+    "/api/zones/{zone_id}",
+    response_model=ZoneOut,
+    summary="Replace a zone (name, kind, polygon, limit)",
+    responses={**NO_ZONE, **INVALID},
+)
+def replace_zone(zone_id: DbId, body: ZoneIn, rt: RuntimeDep, zones: ZonesDep) -> ZoneOut:
+    old = _zone(zones, zone_id)
+    z = zones.store.replace(zone_id, _spec(rt, old.map_id, body))
+    if z is None:
+        raise ProblemError(404, f"no zone with id {zone_id}", kind="not-found")
+    zones.reload(z.map_id)
+    return zone_out(z)
+
+
+@router.delete("/api/zones/{zone_id}", status_code=204, summary="Delete a zone", responses=NO_ZONE)
+def delete_zone(zone_id: DbId, zones: ZonesDep) -> Response:
+    z = zones.store.delete(zone_id)
+    if z is None:
+        raise ProblemError(404, f"no zone with id {zone_id}", kind="not-found")
+    zones.reload(z.map_id)
+    return Response(status_code=204)
