@@ -95,17 +95,15 @@ class FrontierReport:
 
 
 def frontier_mask(grid: OccupancyGrid, free_threshold: int = 25) -> np.ndarray:
-    """(H, W) bool: free cells with at least one unknown 8-neighbour (cells off the grid are not
-    unknown: the map's edge is where SLAM has not yet grown it only if the edge cell is unknown)."""
+    """(H, W) bool: free cells with at least one unknown 8-neighbour. Cells off the grid count as
+    unknown: a SLAM map ends where its rays ended, so a free cell on its edge borders the unseen."""
     data = grid.data
     free = (data >= 0) & (data <= free_threshold)
-    unknown = data < 0
-    return free & ndimage.binary_dilation(unknown, structure=EIGHT)
+    unknown = np.pad(data < 0, 1, constant_values=True)
+    return free & ndimage.binary_dilation(unknown, structure=EIGHT)[1:-1, 1:-1]
 
 
-def distance_field(
-    costmap: Costmap, start: Pose2D, cost_travel_multiplier: float = 2.0
-) -> np.ndarray:
+def distance_field(costmap: Costmap, start: Pose2D, cost_travel_multiplier: float = 2.0) -> np.ndarray:
     """Travel distance (m) from ``start`` to every cell over the costmap's traversable known cells
     (below the inscribed cost), 8-connected, no corner cutting; inf where unreachable.
 

@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from nav.costmap import CostmapOptions, Costmap2D
+from nav.costmap import Costmap2D, CostmapOptions
 from nav.exploration import (
     FrontierExplorer,
     FrontierOptions,
@@ -40,20 +40,25 @@ def _corridor() -> np.ndarray:
     return data
 
 
+def _walled(n: int = 12) -> np.ndarray:
+    data = np.full((n, n), 100, dtype=np.int8)
+    data[1:-1, 1:-1] = 0
+    return data
+
+
 def test_frontier_cells_are_free_cells_next_to_unknown():
-    data = np.full((10, 10), 0, dtype=np.int8)
-    data[:, 6:] = -1
-    data[0, 0] = 100
+    data = _walled()
+    data[1:-1, 7:-1] = -1
     mask = frontier_mask(_grid(data))
-    assert mask[:, 5].all()  # the free column touching the unknown
-    assert not mask[:, :5].any()
-    assert not mask[:, 6:].any()  # unknown cells are never frontier cells
+    assert mask[1:-1, 6].all()  # the free column touching the unknown
+    assert not mask[:, :6].any()
+    assert not mask[:, 7:].any()  # unknown and occupied cells are never frontier cells
 
 
 def test_occupied_cells_next_to_unknown_are_not_frontiers():
-    data = np.full((10, 10), 0, dtype=np.int8)
-    data[:, 5] = 100  # a wall between free and unknown
-    data[:, 6:] = -1
+    data = _walled()
+    data[1:-1, 6] = 100  # a wall between free and unknown
+    data[1:-1, 7:-1] = -1
     assert not frontier_mask(_grid(data)).any()
 
 
@@ -174,3 +179,12 @@ def test_mismatched_costmap_is_refused():
 def test_goal_pose_faces_away_from_the_robot():
     p = goal_pose((2.0, 1.0), Pose2D(1.0, 1.0, 2.0))
     assert (p.x, p.y) == (2.0, 1.0) and p.theta == pytest.approx(0.0)
+
+
+def test_free_cells_on_the_map_edge_border_the_unseen():
+    # a SLAM map ends where the rays ended: its free edge cells are frontiers
+    data = np.zeros((10, 10), dtype=np.int8)
+    data[:, 0] = 100
+    mask = frontier_mask(_grid(data))
+    assert mask[0, 1:].all() and mask[-1, 1:].all() and mask[:, -1].all()
+    assert not mask[1:-1, 1:-1].any() and not mask[:, 0].any()

@@ -18,7 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
@@ -68,7 +68,7 @@ class ExplorationRefused(RuntimeError):
 
 @dataclass(frozen=True)
 class ExplorationOptions:
-    frontiers: FrontierOptions = FrontierOptions()
+    frontiers: FrontierOptions = field(default_factory=FrontierOptions)
     replan_interval: float = 1.0
     """Seconds between re-evaluations of the frontiers while driving to one (``explore_lite``
     ``planner_frequency`` 0.33 Hz; the map is published at 1 Hz here)."""
@@ -156,7 +156,9 @@ class Exploration:
             return
         mode = session.modes.mode
         if mode != Mode.MAPPING:
-            self._end(now, ExplorationState.INTERRUPTED, f"mode changed to {mode.value}: {session.modes.reason}")
+            self._end(
+                now, ExplorationState.INTERRUPTED, f"mode changed to {mode.value}: {session.modes.reason}"
+            )
             return
         assert self._started is not None
         if self.time_budget is not None and now - self._started >= self.time_budget:
@@ -206,7 +208,10 @@ class Exploration:
                 self.goals_failed += 1
                 self.explorer.mark_failed(self._goal)
                 self.session.add_event(
-                    "exploration", status="frontier blacklisted", goal=list(self._goal), reason=out.get("reason")
+                    "exploration",
+                    status="frontier blacklisted",
+                    goal=list(self._goal),
+                    reason=out.get("reason"),
                 )
             elif kind == "cancelled" and out.get("reason") == "teleop":
                 self._request = None
@@ -224,7 +229,7 @@ class Exploration:
             return  # keep driving to it
         chosen = report.chosen
         if chosen is None:
-            if self._request is None:
+            if self._request is None and report.free_area_m2 > 0:  # not before SLAM saw anything
                 left = len(report.frontiers)
                 why = "no frontier left" if left == 0 else f"no reachable frontier left ({left} unreachable)"
                 self._end(now, ExplorationState.COMPLETE, why)
@@ -236,7 +241,9 @@ class Exploration:
         except (ValueError, RuntimeError) as exc:  # GoalRejected / NavigationRefused: try another
             self.explorer.mark_failed(chosen.goal)
             self.goals_failed += 1
-            self.session.add_event("exploration", status="goal refused", goal=list(chosen.goal), reason=str(exc))
+            self.session.add_event(
+                "exploration", status="goal refused", goal=list(chosen.goal), reason=str(exc)
+            )
             return
         self._request, self._goal = rid, chosen.goal
         self.goals_sent += 1
@@ -254,10 +261,7 @@ class Exploration:
         assert self._goal is not None
         gx, gy = self._goal
         reach = self.options.frontiers.goal_reach + 2 * self.options.frontiers.blacklist_radius
-        for f in report.reachable:
-            if np.hypot(f.cells[:, 0] - gx, f.cells[:, 1] - gy).min() <= reach:
-                return True
-        return False
+        return any(np.hypot(f.cells[:, 0] - gx, f.cells[:, 1] - gy).min() <= reach for f in report.reachable)
 
     def _sample(self, report: FrontierReport) -> np.ndarray | None:
         if not report.frontiers:
@@ -302,11 +306,18 @@ class Exploration:
         report = self._report
         pending = self._start_pending
         state = ExplorationState.EXPLORING if pending else self.state
-        ended_with_map = state in (ExplorationState.COMPLETE, ExplorationState.TIME_BUDGET, ExplorationState.STOPPED)
+        stopping = self._stop_pending
+        if stopping is not None and state == ExplorationState.EXPLORING:  # the loop ends it next tick
+            state = ExplorationState.STOPPED
+        ended_with_map = state in (
+            ExplorationState.COMPLETE,
+            ExplorationState.TIME_BUDGET,
+            ExplorationState.STOPPED,
+        )
         return {
             "state": state.value,
             "active": state == ExplorationState.EXPLORING,
-            "reason": "" if pending else self.reason,
+            "reason": f"stopped by {stopping}" if stopping is not None else "" if pending else self.reason,
             "elapsed_s": None if elapsed is None or pending else round(elapsed, 1),
             "time_budget_s": self.time_budget,
             "time_left_s": None if left is None or pending else round(left, 1),
@@ -314,7 +325,9 @@ class Exploration:
             "frontiers": None if report is None else len(report.frontiers),
             "reachable_frontiers": None if report is None else len(report.reachable),
             "frontier_cells": None if report is None else report.frontier_cells,
-            "goal": None if self._goal is None else {"x": round(self._goal[0], 3), "y": round(self._goal[1], 3)},
+            "goal": None
+            if self._goal is None
+            else {"x": round(self._goal[0], 3), "y": round(self._goal[1], 3)},
             "goals_sent": self.goals_sent,
             "goals_reached": self.goals_reached,
             "goals_failed": self.goals_failed,

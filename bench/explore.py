@@ -1,0 +1,191 @@
+"""Exploration (issue 18): explore stock and generated worlds from a random start with one click,
+and send goals into unexplored parts of the office while mapping.
+
+``explore``: ``navdeck explore`` on each stock world and on generated apartments and offices
+(``robot/sim/worldgen``), each from a random start drawn from its seed. Figures per family:
+- explored: of the *reachable free area* -- the world's free cells in the free region that holds
+  the start (cells under tables and behind chair legs included: a lidar sees most of them) -- the
+  share the built map knows as free (map_saver ``free_thresh``), compared in the world frame through
+  the robot's true start pose (the SLAM map frame starts there, as in ``bench/ghost.py``);
+- map agreement: known cells of the built map whose class agrees with the world: a free cell
+  (<= 25) where the world is free inside its outer walls, an occupied cell (>= 65) within one cell
+  of a world wall (the map's registration error); cells in between are not counted;
+- collisions; time and the ratio to a lower bound of the time any tour that sees everything needs:
+  the robot must at least reach, for the free cell hardest to see, a place within lidar range of
+  it, so ``max over free cells of (the shortest path, at the profile's max_vel_x, from the start to
+  the nearest reachable cell within the lidar's range square around it)`` -- walls do not block
+  sight in the bound (relaxed), and it is one way, not a tour: a loose lower bound, and the ratio an
+  upper bound of how far from the best tour the exploration is.
+
+``explore.navigate_while_mapping``: in the office, mapping from the corridor, goals drawn in free
+space the map does not know yet are sent (as an operator clicks them once the map reaches them: a
+goal is sent when the map around it is known, which is what the dashboard lets a user click);
+reached and collisions are counted.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from bench.core import Benchmark, Figure
+from bench.ghost import FREE_MAX, _world_free_and_exterior
+from nav.types import OccupancyGrid, Pose2D
+
+OCCUPIED_MIN = 65
+
+
+@dataclass(frozen=True)
+class Comparison:
+    explored: float
+    explored_area_m2: float
+    reachable_area_m2: float
+    agreement: float
+    free_cells: int
+    occupied_cells: int
+
+
+def reachable_free(world, start: Pose2D) -> np.ndarray:
+    """(H, W) bool: world free cells (inside the outer walls) connected to the start's cell."""
+    interior, _ = _world_free_and_exterior(world.static_occupied)
+    labels, _ = ndimage.label(interior, structure=np.ones((3, 3), bool))
+    rows, cols = world.geometry.world_to_cell(np.array([[start.x, start.y]]))
+    lab = labels[int(rows[0]), int(cols[0])]
+    if lab == 0:
+        raise ValueError(f"start ({start.x:.2f}, {start.y:.2f}) is not in the world's free space")
+    return labels == lab
+
+
+def compare(built: OccupancyGrid, world, map_in_world: Pose2D, start: Pose2D) -> Comparison:
+    """The built map against the world (see the module docstring)."""
+    wg = world.geometry
+    reach = reachable_free(world, start)
+    rows, cols = np.nonzero(reach)
+    pts = wg.cell_to_world(rows, cols)
+    bg = built.geometry
+    br, bc = bg.world_to_cell(map_in_world.inverse().transform_points(pts))
+    inside = bg.in_bounds(br, bc)
+    vals = np.full(rows.size, -1, dtype=np.int16)
+    vals[inside] = built.data[br[inside], bc[inside]]
+    known_free = (vals >= 0) & (vals <= FREE_MAX)
+    cell = wg.resolution * wg.resolution
+    # every known cell of the built map, in the world
+    kr, kc = np.nonzero(built.data >= 0)
+    v = built.data[kr, kc]
+    wpts = map_in_world.transform_points(bg.cell_to_world(kr, kc))
+    wr, wc = wg.world_to_cell(wpts)
+    ok = wg.in_bounds(wr, wc)
+    wr, wc = np.clip(wr, 0, wg.height - 1), np.clip(wc, 0, wg.width - 1)
+    interior, _ = _world_free_and_exterior(world.static_occupied)
+    near_wall = ndimage.binary_dilation(world.static_occupied, structure=np.ones((3, 3), bool))
+    is_free, is_occ = v <= FREE_MAX, v >= OCCUPIED_MIN
+    agree_free = is_free & ok & interior[wr, wc]
+    agree_occ = is_occ & ok & near_wall[wr, wc]
+    counted = int(np.count_nonzero(is_free | is_occ))
+    agree = int(np.count_nonzero(agree_free | agree_occ))
+    return Comparison(
+        explored=float(known_free.mean()) if rows.size else 0.0,
+        explored_area_m2=float(np.count_nonzero(known_free)) * cell,
+        reachable_area_m2=float(rows.size) * cell,
+        agreement=agree / counted if counted else 0.0,
+        free_cells=int(np.count_nonzero(is_free)),
+        occupied_cells=int(np.count_nonzero(is_occ)),
+    )
+
+
+def tour_lower_bound_s(world, start: Pose2D, profile: str = "skid4") -> float:
+    """Seconds any exploration needs at least (module docstring): the farthest view point, at
+    ``max_vel_x``, over the passable cells (the circumscribed radius clear of walls)."""
+    from nav.exploration import distance_field
+    from nav.types import Costmap
+    from robot.profiles import load_profile
+
+    prof = load_profile(profile)
+    wg = world.geometry
+    passable = world.clearance_map >= prof.circumscribed_radius
+    costs = np.where(passable, 0, 254).astype(np.uint8)
+    dist = distance_field(Costmap(wg, costs), start, cost_travel_multiplier=0.0)
+    k = 2 * math.floor(prof.lidar.range_max / wg.resolution) + 1
+    # the square window holds the range disc: its minimum is <= the disc's, so still a lower bound
+    nearest_view = ndimage.minimum_filter(dist, size=k, mode="constant", cval=np.inf)
+    reach = reachable_free(world, start)
+    far = nearest_view[reach]
+    far = far[np.isfinite(far)]
+    return float(far.max()) / prof.limits.max_vel_x if far.size else 0.0
+
+
+STOCK = ("apartment", "office", "greenhouse")
+FAMILY_SEEDS = {"apartment": range(0, 4), "office": range(0, 2)}
+"""Generated worlds per family in the default run (each is minutes of simulated exploring on the
+2-core machine); ``run_family`` takes any range."""
+
+
+def run_one(world_spec: str, seed: int, timeout: float = 1800.0) -> dict[str, float]:
+    from app.commands.explore import ExploreConfig, load_world, random_start, run_explore
+
+    world = load_world(world_spec)
+    start = random_start(world, "skid4", seed)
+    res = run_explore(
+        ExploreConfig(world=world_spec, start=(start.x, start.y, start.theta), seed=seed, timeout=timeout),
+        world,
+    )
+    bound = tour_lower_bound_s(world, start)
+    return {
+        "explored_pct": res.explored_pct,
+        "agreement_pct": res.map_agreement_pct,
+        "collisions": float(res.collisions),
+        "time_s": res.time_s,
+        "bound_s": bound,
+        "ratio": res.time_s / bound if bound > 0 else math.inf,
+        "complete": float(res.state == "complete"),
+        "path_m": res.path_length_m,
+        "wall_s": res.wall_s,
+    }
+
+
+def _family_figures(name: str, runs: list[dict[str, float]]) -> list[Figure]:
+    n = len(runs)
+    explored = np.array([r["explored_pct"] for r in runs])
+    agree = np.array([r["agreement_pct"] for r in runs])
+    coll = sum(r["collisions"] for r in runs)
+    ratio = np.array([r["ratio"] for r in runs])
+    return [
+        Figure(
+            f"{name} (N={n}): explored, mean",
+            float(explored.mean()),
+            "%",
+            ">= 95",
+            bool(explored.min() >= 95),
+        ),
+        Figure(f"{name} (N={n}): explored, worst", float(explored.min()), "%"),
+        Figure(
+            f"{name} (N={n}): map agreement, worst", float(agree.min()), "%", ">= 98", bool(agree.min() >= 98)
+        ),
+        Figure(f"{name} (N={n}): collisions", float(coll), "", "0", coll == 0),
+        Figure(
+            f"{name} (N={n}): ended with no reachable frontier",
+            float(sum(r["complete"] for r in runs)),
+            "runs",
+        ),
+        Figure(f"{name} (N={n}): time, mean", float(np.mean([r["time_s"] for r in runs])), "s"),
+        Figure(f"{name} (N={n}): time / lower bound, median", float(np.median(ratio)), "x"),
+    ]
+
+
+def run_family(family: str, seeds: range) -> list[Figure]:
+    return _family_figures(f"generated {family}", [run_one(f"{family}:{s}", s) for s in seeds])
+
+
+def _explore() -> list[Figure]:
+    out: list[Figure] = []
+    for name in STOCK:
+        out.extend(_family_figures(f"stock {name}", [run_one(name, 0)]))
+    for family, seeds in FAMILY_SEEDS.items():
+        out.extend(run_family(family, seeds))
+    return out
+
+
+BENCHMARKS = [Benchmark(name="explore", run=_explore, group="slow")]
