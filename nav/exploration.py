@@ -43,8 +43,11 @@ class FrontierOptions:
     """Frontiers shorter than this (m) are ignored: a few unknown cells behind a chair leg or in a
     wall's shadow are not worth a trip (explore_lite: 0.5 m; smaller here so a 0.8 m doorway seen
     edge-on still counts)."""
-    free_threshold: int = 25
-    """Occupancy values 0..this count as free (map_saver ``free_thresh`` 0.25)."""
+    free_threshold: int = 64
+    """Occupancy values 0..this count as free: known and below map_server's ``occupied_thresh``
+    (0.65), as Nav2's static layer reads a trinary map, so a frontier is what the planner may
+    enter. (A live SLAM map marks a cell seen free once at 40: map_saver's 0.25 would wait for
+    several scans of it.)"""
     goal_reach: float = 0.6
     """A frontier all of whose cells are too close to a wall for the footprint is still a target:
     the robot goes to the nearest traversable cell within this distance (m), from where its lidar
@@ -94,7 +97,7 @@ class FrontierReport:
         return [f for f in self.frontiers if f.reachable]
 
 
-def frontier_mask(grid: OccupancyGrid, free_threshold: int = 25) -> np.ndarray:
+def frontier_mask(grid: OccupancyGrid, free_threshold: int = 64) -> np.ndarray:
     """(H, W) bool: free cells with at least one unknown 8-neighbour. Cells off the grid count as
     unknown: a SLAM map ends where its rays ended, so a free cell on its edge borders the unseen."""
     data = grid.data

@@ -188,3 +188,12 @@ def test_free_cells_on_the_map_edge_border_the_unseen():
     mask = frontier_mask(_grid(data))
     assert mask[0, 1:].all() and mask[-1, 1:].all() and mask[:, -1].all()
     assert not mask[1:-1, 1:-1].any() and not mask[:, 0].any()
+
+
+def test_cells_seen_free_once_count_as_free():
+    # a live SLAM map marks a cell seen free by one scan at 40: already a place to go
+    data = np.full((12, 12), -1, dtype=np.int8)
+    data[:, :6] = 40
+    data[0, :6] = 70  # occupied (>= 65) is never free
+    mask = frontier_mask(_grid(data))
+    assert mask[1:-1, 5].all() and not mask[0].any()
