@@ -18,6 +18,7 @@ from __future__ import annotations
 import logging
 import math
 import threading
+from concurrent.futures import Future
 from dataclasses import dataclass, field
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
@@ -26,6 +27,7 @@ import numpy as np
 
 from app.modes import Mode
 from nav.exploration import FrontierExplorer, FrontierOptions, FrontierReport, goal_pose
+from nav.types import Pose2D
 
 if TYPE_CHECKING:
     from app.features.mapping import Mapping
@@ -103,6 +105,11 @@ class Exploration:
         self._goal: tuple[float, float] | None = None
         self._last_eval = -math.inf
         self._evaluated_grid: Any = None
+        self._need_eval = False  # a goal ended (or exploring began): evaluate without waiting
+        self._job: Future | None = None  # a frontier search on a worker (real clock)
+        # On a virtual clock the search runs in the tick (deterministic); on a real one on a worker:
+        # its Dijkstra over a large map takes longer than a control period.
+        self.synchronous = bool(getattr(session.clock, "is_virtual", False))
         self._report: FrontierReport | None = None
         self._frontier_points: np.ndarray | None = None
         self.goals_sent = 0
@@ -169,13 +176,35 @@ class Exploration:
             return  # SLAM's first map is not out yet
         if self._check_goal_outcome(now):
             return
+        if self._job is not None:
+            if not self._job.done():
+                return
+            job, self._job = self._job, None
+            try:
+                report, grid, pose = job.result()
+            except Exception:  # a failed search must not end exploring: the next map is tried
+                log.exception("frontier search failed")
+                return
+            self._decide(report, grid, pose, now)
+            return
         grid, costmap = self.navigation.live_grid, self.navigation.global_costmap
         if grid is None or costmap is None:
             return
-        running = self._request is not None
-        if running and (grid is self._evaluated_grid or now - self._last_eval < self.options.replan_interval):
+        fresh = grid is not self._evaluated_grid
+        due = now - self._last_eval >= self.options.replan_interval
+        if not ((fresh and due) or (self._need_eval and self._request is None)):
             return
-        self._evaluate(grid, costmap, now)
+        self._need_eval = False
+        self._evaluated_grid, self._last_eval = grid, now
+        pose = session.pose
+        if self.synchronous:
+            self._decide(*self._search(grid, costmap, pose), now)
+        else:
+            self._job = session.workers.submit(self._search, grid, costmap, pose)
+
+    def _search(self, grid: Any, costmap: Any, pose: Pose2D) -> tuple[FrontierReport, Any, Pose2D]:
+        """The frontier search (a worker on a real clock; it only reads the explorer's blacklist)."""
+        return self.explorer.find(grid, costmap, pose), grid, pose
 
     def _begin(self, now: float) -> None:
         self.explorer.clear_blacklist()
@@ -186,6 +215,8 @@ class Exploration:
         self._report = None
         self._frontier_points = None
         self._evaluated_grid = None
+        self._need_eval = True
+        self._job = None
         self._last_eval = -math.inf
         self.goals_sent = self.goals_reached = self.goals_failed = 0
         self.session.add_event(
@@ -218,12 +249,12 @@ class Exploration:
                 self._end(now, ExplorationState.STOPPED, "the operator drove by hand")
                 return True
         self._request = self._goal = None
+        self._need_eval = True
         return False
 
-    def _evaluate(self, grid: Any, costmap: Any, now: float) -> None:
-        pose = self.session.pose
-        report = self.explorer.find(grid, costmap, pose)
-        self._report, self._evaluated_grid, self._last_eval = report, grid, now
+    def _decide(self, report: FrontierReport, grid: Any, pose: Pose2D, now: float) -> None:
+        """Act on a frontier search: keep the goal, send the best frontier's, or end (loop thread)."""
+        self._report = report
         self._frontier_points = self._sample(report)
         if self._request is not None and self._goal is not None and self._goal_still_frontier(report):
             return  # keep driving to it
@@ -231,7 +262,11 @@ class Exploration:
         if chosen is None:
             if self._request is None and report.free_area_m2 > 0:  # not before SLAM saw anything
                 left = len(report.frontiers)
-                why = "no frontier left" if left == 0 else f"no reachable frontier left ({left} unreachable)"
+                why = (
+                    "no frontier left"
+                    if left == 0
+                    else f"no reachable frontier left ({left} unreachable or blacklisted)"
+                )
                 self._end(now, ExplorationState.COMPLETE, why)
             return  # the running goal finishes (its frontier is mapped): re-evaluated after it
         assert chosen.goal is not None
@@ -241,6 +276,7 @@ class Exploration:
         except (ValueError, RuntimeError) as exc:  # GoalRejected / NavigationRefused: try another
             self.explorer.mark_failed(chosen.goal)
             self.goals_failed += 1
+            self._need_eval = True
             self.session.add_event(
                 "exploration", status="goal refused", goal=list(chosen.goal), reason=str(exc)
             )
@@ -277,6 +313,7 @@ class Exploration:
 
     def _end(self, now: float, state: ExplorationState, reason: str) -> None:
         self.state, self.reason, self._ended = state, reason, now
+        self._job = None  # a search still running is not acted on
         area = self._report.free_area_m2 if self._report is not None else 0.0
         self.session.add_event(
             "exploration",
