@@ -53,6 +53,14 @@ class FrontierOptions:
     the robot goes to the nearest traversable cell within this distance (m), from where its lidar
     sees past the frontier."""
     blacklist_radius: float = 0.5
+    min_goal_distance: float = 0.4
+    """A frontier whose goal is this close to the robot stays unseen from where the robot stands
+    (under furniture, in a sensor shadow): it is not chosen, and ``FrontierReport.unobservable``
+    lists it for the caller to blacklist (the goal checker's 0.25 m plus a margin)."""
+    goal_max_cost: int = 100
+    """Goal cells are taken among those with a cost up to this when the frontier has any (away from
+    the steep part of the inflation, where a controller may fail to settle), else among all
+    traversable ones."""
     """A frontier whose goal is within this distance (m) of a failed goal is not chosen again."""
     cost_travel_multiplier: float = 2.0
     """Step cost weighting of the distance field, as the planner's (keeps travel costs comparable
@@ -91,6 +99,8 @@ class FrontierReport:
     """Known-free area of the map (m^2): what has been explored."""
     blacklisted: int = 0
     """Better-ranked reachable frontiers skipped because their goal is near a failed one."""
+    unobservable: list[tuple[float, float]] = field(default_factory=list)
+    """Goals of better-ranked frontiers skipped because the robot stands at them already."""
 
     @property
     def reachable(self) -> list[Frontier]:
@@ -190,10 +200,13 @@ class FrontierExplorer:
             rows, cols = np.nonzero(own)
             cells = geo.cell_to_world(rows + r0, cols + c0)
             d_win = dist[r0:r1, c0:c1]
-            on = np.where(own, d_win, np.inf)
-            if not np.isfinite(on).any():
-                near = ndimage.binary_dilation(own, structure=disk) & np.isfinite(d_win)
-                on = np.where(near, d_win, np.inf)
+            low = costmap.costs[r0:r1, c0:c1] <= o.goal_max_cost
+            near = ndimage.binary_dilation(own, structure=disk)
+            # the frontier's own cells, else cells within reach; low-cost cells first in each
+            for region in (own & low, own, near & low, near):
+                on = np.where(region, d_win, np.inf)
+                if np.isfinite(on).any():
+                    break
             goal, travel = None, math.inf
             if np.isfinite(on).any():
                 i = int(np.argmin(on))
@@ -206,16 +219,19 @@ class FrontierExplorer:
             cx, cy = cells.mean(axis=0)
             frontiers.append(Frontier(cells, length, (float(cx), float(cy)), goal, travel, cost))
         frontiers.sort(key=lambda f: f.cost)
-        chosen, skipped = None, 0
+        chosen, skipped, here = None, 0, []
         for f in frontiers:
             if f.goal is None:
                 break  # sorted: the rest are unreachable too
             if self._blacklisted(f.goal):
                 skipped += 1
                 continue
+            if math.hypot(f.goal[0] - robot.x, f.goal[1] - robot.y) < o.min_goal_distance:
+                here.append(f.goal)
+                continue
             chosen = f
             break
-        return FrontierReport(frontiers, chosen, int(np.count_nonzero(mask)), free_area, skipped)
+        return FrontierReport(frontiers, chosen, int(np.count_nonzero(mask)), free_area, skipped, here)
 
 
 def _disk(radius_cells: int) -> np.ndarray:

@@ -197,3 +197,25 @@ def test_cells_seen_free_once_count_as_free():
     data[0, :6] = 70  # occupied (>= 65) is never free
     mask = frontier_mask(_grid(data))
     assert mask[1:-1, 5].all() and not mask[0].any()
+
+
+def test_a_frontier_the_robot_stands_at_is_reported_unobservable():
+    grid = _grid(_corridor())
+    cm = _costmap(grid)
+    first = FrontierExplorer().find(grid, cm, Pose2D(0.8, 0.75)).chosen
+    assert first is not None and first.goal is not None
+    at = Pose2D(first.goal[0] - 0.1, first.goal[1], 0.0)
+    rep = FrontierExplorer().find(grid, cm, at)
+    assert rep.chosen is None and rep.unobservable == [first.goal]
+
+
+def test_goals_keep_off_the_walls_when_the_frontier_allows():
+    data = _corridor()
+    grid = _grid(data)
+    cm = _costmap(grid)
+    robot = Pose2D(0.8, 0.4)  # close to a wall: by travel alone the goal would hug it (cost 92)
+    opts = FrontierOptions(goal_max_cost=50, cost_travel_multiplier=0.0)
+    rep = FrontierExplorer(opts).find(grid, cm, robot)
+    assert rep.chosen is not None and rep.chosen.goal is not None
+    r, c = grid.geometry.world_to_cell(np.array([rep.chosen.goal]))
+    assert cm.costs[r[0], c[0]] <= 50

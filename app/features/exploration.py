@@ -255,6 +255,9 @@ class Exploration:
     def _decide(self, report: FrontierReport, grid: Any, pose: Pose2D, now: float) -> None:
         """Act on a frontier search: keep the goal, send the best frontier's, or end (loop thread)."""
         self._report = report
+        for goal in report.unobservable:  # the robot stands there and still does not see past it
+            self.explorer.mark_failed(goal)
+            self.session.add_event("exploration", status="frontier unobservable", goal=list(goal))
         self._frontier_points = self._sample(report)
         if self._request is not None and self._goal is not None and self._goal_still_frontier(report):
             return  # keep driving to it
