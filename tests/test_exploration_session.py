@@ -44,6 +44,7 @@ def _known_free_goal(stack, near: Pose2D, at_least: float) -> Pose2D:
     return Pose2D(float(pts[i, 0]), float(pts[i, 1]), 0.0)
 
 
+@pytest.mark.slow
 def test_exploring_the_apartment_maps_it_to_the_end():
     stack = _stack()
     s, ex = stack.session, stack.exploration
