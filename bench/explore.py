@@ -233,25 +233,34 @@ def _unexplored_goals(world, start: Pose2D, n: int, seed: int, clearance: float)
     return [Pose2D(float(x), float(y), float(rng.uniform(-math.pi, math.pi))) for x, y in pts[pick]]
 
 
-def _toward(nav, target: Pose2D, pose: Pose2D) -> Pose2D | None:
-    """What an operator clicks to get to ``target`` (map frame) while mapping: the target itself
-    once the map knows it as free, else the reachable known cell nearest to it (the edge of the map
-    on its side). None: nothing reachable."""
-    from nav.exploration import distance_field
+def _known(nav, target: Pose2D) -> bool:
+    """Whether the live costmap has ``target`` as a traversable known cell (a goal it accepts)."""
     from nav.types import INSCRIBED_INFLATED_OBSTACLE
 
     cm = nav.global_costmap
-    geo = cm.geometry
-    rows, cols = geo.world_to_cell(np.array([[target.x, target.y]]))
-    if geo.in_bounds(rows, cols)[0] and cm.costs[rows[0], cols[0]] < INSCRIBED_INFLATED_OBSTACLE:
+    rows, cols = cm.geometry.world_to_cell(np.array([[target.x, target.y]]))
+    return bool(
+        cm.geometry.in_bounds(rows, cols)[0] and cm.costs[rows[0], cols[0]] < INSCRIBED_INFLATED_OBSTACLE
+    )
+
+
+def _toward(nav, explorer, target: Pose2D, pose: Pose2D) -> Pose2D | None:
+    """What an operator clicks to get to ``target`` (map frame) while mapping: the target itself
+    once the map knows it as traversable, else the goal of the open edge of the map (a frontier)
+    that leads there best: least travel to it plus straight-line distance on to the target.
+    None: no frontier is left to try."""
+    if _known(nav, target):
         return target
-    dist = distance_field(cm, pose)
-    r, c = np.nonzero(np.isfinite(dist))
-    if r.size == 0:
-        return None
-    pts = geo.cell_to_world(r, c)
-    i = int(np.argmin(np.hypot(pts[:, 0] - target.x, pts[:, 1] - target.y)))
-    return Pose2D(float(pts[i, 0]), float(pts[i, 1]), target.theta)
+    report = explorer.find(nav.live_grid, nav.global_costmap, pose)
+    best, score = None, math.inf
+    for f in report.reachable:
+        g = f.goal
+        if explorer._blacklisted(g) or math.hypot(g[0] - pose.x, g[1] - pose.y) < 0.4:
+            continue
+        s = f.travel + math.hypot(g[0] - target.x, g[1] - target.y)
+        if s < score:
+            best, score = g, s
+    return None if best is None else Pose2D(best[0], best[1], target.theta)
 
 
 def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float = 300.0) -> dict[str, float]:
@@ -259,6 +268,7 @@ def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float =
     each on the growing map (``_toward``) until it is known, then on it. Reached: the robot's true
     position within 0.35 m of the goal (the goal checker's 0.25 m plus the SLAM map's drift)."""
     from app.commands.explore import build_explore_stack, load_world
+    from nav.exploration import FrontierExplorer
 
     world = load_world("office")
     stack = build_explore_stack(world, OFFICE_START, seed=seed)
@@ -274,21 +284,28 @@ def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float =
         for g in goals:
             target = g.relative_to(start_truth)  # the map frame starts at the true start pose
             t0 = s.clock.now()
+            edges = FrontierExplorer()  # frontiers clicked in vain for this goal are not clicked again
             while s.clock.now() - t0 < per_goal_s:
-                click = _toward(nav, target, s.pose)
+                click = _toward(nav, edges, target, s.pose)
                 if click is None:
                     break
                 try:
                     nav.set_goals([click])
                 except (ValueError, RuntimeError):
-                    s.run_for(1.0)  # a refused click: the map changes, try again
+                    edges.mark_failed((click.x, click.y))
+                    s.run_for(1.0)
                     continue
                 while s.clock.now() - t0 < per_goal_s:
                     s.run_for(s.period)
                     if not nav.active and nav.pending_request() is None:
                         break
-                if click is target and nav.last_outcome and nav.last_outcome["kind"] == "reached":
+                    if click is not target and nav.active and _known(nav, target):
+                        break  # the target came into the map on the way: click it now
+                kind = (nav.last_outcome or {}).get("kind")
+                if click is target and kind == "reached":
                     break
+                if kind == "failed":
+                    edges.mark_failed((click.x, click.y))
             truth = stack.driver.truth_pose
             if truth.distance_to(g) <= 0.35:
                 reached += 1
