@@ -187,6 +187,9 @@ class Session:
         self._thread: threading.Thread | None = None
         self.stages: list[Stage] = []
         self.command_sources: dict[Mode, CommandSource] = {}
+        # True while a navigation request drives in MAPPING (navigate while mapping, exploration):
+        # the MAPPING command source then drives instead of teleop.
+        self.mapping_autonomy: Callable[[], bool] | None = None
         # Last word before the driver, below every planner: (command, frame) -> (command, reason or None).
         self.safety: SafetyFilter | None = None
         self._last_frame: SensorFrame | None = None
@@ -239,6 +242,13 @@ class Session:
             ):
                 self.add_event("refused", what="teleop", reason=str(exc))
             raise
+
+    def teleop_engaged(self, now: float) -> bool:
+        """An operator is driving by hand right now: a fresh (within the deadman time) non-zero
+        teleop command from an armed client."""
+        with self._lock:
+            tele = self._teleop
+        return not tele.command.is_zero() and now - tele.stamp <= self.options.deadman_timeout
 
     @property
     def teleop_command(self) -> Twist2D:
@@ -475,6 +485,10 @@ class Session:
         mode = self.modes.mode
         if self.estop_latched or mode in (Mode.ESTOP, Mode.FAULT) or self.fault is not None:
             return None
+        if mode == Mode.MAPPING and self.mapping_autonomy is not None and self.mapping_autonomy():
+            source = self.command_sources.get(Mode.MAPPING)
+            if source is not None:
+                return source(now)
         if mode in (Mode.TELEOP, Mode.MAPPING):
             with self._lock:
                 tele = self._teleop

@@ -64,7 +64,7 @@ def snapshot_dict(
         "health": snap.health,
         "goal": pose_dict(snap.goal) if snap.goal is not None else None,
     }
-    for key in ("navigation", "localization", "mapping", "contact", "zones"):
+    for key in ("navigation", "localization", "mapping", "exploration", "contact", "zones"):
         if key in snap.extras:
             out[key] = snap.extras[key]
     if "navigation" in out:

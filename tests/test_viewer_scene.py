@@ -488,3 +488,21 @@ def test_initial_pose_click_is_one_shot(viewer: Viewer) -> None:
     assert viewer.click_kind("") == "goal"
     viewer._on_scene_click(Ev())  # type: ignore[arg-type]
     assert got == [("initial_pose", ""), ("initial_pose", ""), ("goal", "")]
+
+
+def test_frontiers_and_the_chosen_one(viewer: Viewer) -> None:
+    s = viewer.server.scene
+    cells = np.array([[1.0, 2.0], [1.05, 2.0], [3.0, -1.0]], np.float32)
+    viewer.apply(snap(mode="mapping", extras={"frontiers": cells, "frontier_goal": (1.0, 2.0)}))
+    assert viewer.is_shown("/frontiers")
+    np.testing.assert_allclose(s.get_handle_by_name("/frontiers/cells").points[:, :2], cells)
+    np.testing.assert_allclose(s.get_handle_by_name("/frontiers/goal").points[0, :2], (1.0, 2.0))
+    viewer.set_layer_enabled("Frontiers", False)
+    assert not viewer.is_shown("/frontiers")
+    viewer.set_layer_enabled("Frontiers", True)
+    fewer = cells[:1].copy()
+    viewer.apply(snap(mode="mapping", extras={"frontiers": fewer, "frontier_goal": None}))
+    assert s.get_handle_by_name("/frontiers/cells").points.shape == (1, 3)
+    assert s.get_handle_by_name("/frontiers/goal").points.shape == (0, 3)
+    viewer.apply(snap(mode="idle", extras={}))  # exploration over: the layer empties
+    assert not viewer.is_shown("/frontiers")

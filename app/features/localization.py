@@ -264,14 +264,17 @@ class Localization:
             self._awaiting = made
         updates = self.updates
         self._step(session, frame, now)
-        # a request counts as applied once the filter weighed a scan after it (or cannot: no filter),
-        # so a waiter reads the estimate it led to, not the one before
-        if self._awaiting is not None and (self.updates > updates or self.amcl is None):
+        # a request counts as applied once the filter weighed a scan after it (or cannot: no filter,
+        # or mapping, where AMCL is off), so a waiter reads the estimate it led to, not the one before
+        mapping = session.modes.mode == Mode.MAPPING
+        if self._awaiting is not None and (self.updates > updates or self.amcl is None or mapping):
             with self._applied:
                 self._requests_done, self._awaiting = self._awaiting, None
                 self._applied.notify_all()
 
     def _step(self, session: Session, frame: SensorFrame, now: float) -> None:
+        if session.modes.mode == Mode.MAPPING:
+            return  # SLAM localizes while mapping, in its own map frame: AMCL stays off
         if self.options.source == "truth":
             self._track_truth(session)
             return

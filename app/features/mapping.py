@@ -144,6 +144,9 @@ class Mapping:
         # Called (on a worker) with the final map when a session ends: the runtime makes it the
         # active map for localization, so the pose stays in the new map frame after mapping.
         self.on_finished: Callable[[OccupancyGrid], None] | None = None
+        # Told (grid, generation) of every map published, on the thread that applies it; navigation
+        # plans on it while mapping. Listeners must be quick (queue the grid) and never raise.
+        self._grid_listeners: list[Callable[[OccupancyGrid, int], None]] = []
         self._slot = _OneSlot()
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -223,6 +226,10 @@ class Mapping:
             return self.run_id_source() if self.run_id_source is not None else None
         except Exception:  # the recorder is optional
             return None
+
+    def add_grid_listener(self, fn: Callable[[OccupancyGrid, int], None]) -> None:
+        """Be told of each map this stage publishes, with its session's ``generation``."""
+        self._grid_listeners.append(fn)
 
     def saved(self, map_id: int) -> None:
         """The API stored this session's map as ``map_id`` (activating it keeps the robot's pose)."""
@@ -374,6 +381,11 @@ class Mapping:
             self._m2o = slam.map_to_odom()
             final = self._final_pending = not self.running  # the stop's final optimization
         self.session.set_grid(pub.grid)
+        for fn in list(self._grid_listeners):
+            try:
+                fn(pub.grid, self.generation)
+            except Exception:
+                log.exception("map listener failed")
         if final and self.on_finished is not None:
             self.session.workers.submit(self._hand_off, pub.grid)
 

@@ -11,6 +11,13 @@ Planning runs on ``session.workers`` (``request_plan`` -> future -> ``deliver_pl
 thread). With a virtual clock the loop waits for the future in the same tick, so a simulated run is
 deterministic for a seed however fast the machine is.
 
+Navigate while mapping. In MAPPING a goal drives the robot without leaving the mode (one mapping
+session, one recorded run): the costmaps are rebuilt from each map SLAM publishes (about 1 Hz,
+``Mapping.add_grid_listener``), SLAM's pose localizes (AMCL is off in MAPPING), the MAPPING command
+source drives while such a request runs, and an operator's teleop input cancels it (the operator
+took over). Recovery behaviours are not run there (entering RECOVERING would end the mapping
+session): a stuck request fails and its caller (the operator, the explorer) picks another goal.
+
 Recovery hook: when the navigator is STUCK and a ``RecoveryPolicy`` is installed
 (``feature.recovery = policy``), the mode goes to RECOVERING and the policy drives until it says it
 is done, then the navigator resumes. Without one the navigator's ``stuck_timeout`` fails the goal.
@@ -91,6 +98,7 @@ class StopReason(StrEnum):
     SUPERSEDED = "superseded"  # a new request replaced it
     MODE_CHANGE = "mode_change"  # a mode request (teleop, mapping...) took the robot
     MAP_CHANGED = "map_changed"  # the active map changed under it
+    TELEOP = "teleop"  # the operator drove by hand while a goal ran in MAPPING
 
 
 @dataclass(frozen=True)
@@ -353,10 +361,16 @@ class Navigation:
         self._seen_updates = 0  # localization updates already given to the divergence monitor
         self._safety_stop_since: float | None = None
         self._last_map_to_odom = session.map_to_odom
+        self.mapping: Any = None  # the mapping feature, when set up: goals while it runs
+        self._live_generation: int | None = None  # mapping session whose live map the costmaps hold
+        self._in_mapping = False  # the running request drives in MAPPING
+        self.live_grid: OccupancyGrid | None = None  # the SLAM map the costmaps were built from
         self._build_costmaps(localization.grid)
         localization.add_map_listener(self._on_map)
         session.set_command_source(Mode.NAVIGATING, self._command)
         session.set_command_source(Mode.RECOVERING, self._recovery_command)
+        session.set_command_source(Mode.MAPPING, self._command)
+        session.mapping_autonomy = lambda: self._active and self._in_mapping
         session.modes.set_guard(Mode.NAVIGATING, self._guard)
         self._recovery_cmd: Twist2D | None = ZERO_TWIST
         warm = not virtual if o.warm_up is None else o.warm_up
@@ -479,6 +493,32 @@ class Navigation:
         with self._lock:
             self._pending.append(("map", grid))
 
+    def on_live_map(self, grid: OccupancyGrid, generation: int) -> None:
+        """A map SLAM published while mapping (any thread): the costmaps follow it next tick,
+        without ending a goal that runs (navigate while mapping)."""
+        with self._lock:
+            self._pending.append(("live", (grid, generation)))
+
+    def mapping_live(self) -> bool:
+        """Mapping runs and the costmaps hold its latest map: goals may be sent in MAPPING."""
+        m = self.mapping
+        return (
+            m is not None
+            and m.running
+            and self._live_generation == m.generation
+            and self.session.modes.mode == Mode.MAPPING
+        )
+
+    def _apply_live_map(self, grid: OccupancyGrid, generation: int) -> None:
+        """Rebuild both costmaps over the grown map (its geometry changes as SLAM extends it). The
+        local costmap's obstacle marks go with it; the next scan, a tick later, marks them again."""
+        m = self.mapping
+        if m is None or not m.running or generation != m.generation:
+            return  # stale: a map of a session that has ended
+        self._build_costmaps(grid)
+        self.live_grid = grid
+        self._live_generation = generation
+
     @property
     def global_costmap(self) -> Costmap | None:
         """The latest global costmap snapshot (immutable once published)."""
@@ -572,16 +612,20 @@ class Navigation:
         mode = self.session.modes.mode
         if mode in (Mode.ESTOP, Mode.FAULT) or self.session.estop_latched:
             raise NavigationRefused(f"cannot navigate in mode {mode.value} (reset first)", mode.value)
-        # a robot without a lidar says so first, not "not localized"
-        why = self.session.modes.unavailable().get(Mode.NAVIGATING.value) or self._guard()
+        in_mapping = mode == Mode.MAPPING
+        if in_mapping:
+            why = self._mapping_guard()
+        else:  # a robot without a lidar says so first, not "not localized"
+            why = self.session.modes.unavailable().get(Mode.NAVIGATING.value) or self._guard()
         if why:
             raise NavigationRefused(why, mode.value, self.session.modes.allowed())
         for i, g in enumerate(goals):
             self.check_goal(g, i, allow_unknown)
-        try:  # mode first: the loop never sees goals without the mode that drives them
-            self.session.modes.request(Mode.NAVIGATING, "navigation goal")
-        except TransitionRefused as exc:
-            raise NavigationRefused(exc.reason, exc.current.value, exc.allowed) from None
+        if not in_mapping:
+            try:  # mode first: the loop never sees goals without the mode that drives them
+                self.session.modes.request(Mode.NAVIGATING, "navigation goal")
+            except TransitionRefused as exc:
+                raise NavigationRefused(exc.reason, exc.current.value, exc.allowed) from None
         chosen = controller or self.default_controller
         with self._lock:
             if extends is None:
@@ -589,7 +633,7 @@ class Navigation:
                 rid = self._next_id
             else:
                 rid = extends
-            self._pending.append(("goals", (goals, chosen, rid, actor, extends is not None)))
+            self._pending.append(("goals", (goals, chosen, rid, actor, extends is not None, in_mapping)))
         if extends is None:
             self.session.add_event(
                 "navigation",
@@ -608,7 +652,7 @@ class Navigation:
         with self._lock:
             requests = [arg for kind, arg in self._pending if kind == "goals"]
         if requests:  # not picked up by the loop yet: extend the latest one
-            goals, controller, rid, actor, _ = requests[-1]
+            goals, controller, rid, actor, *_ = requests[-1]
             self._submit([*goals, goal], controller, actor, extends=rid)
             return
         req = self._request
@@ -651,6 +695,15 @@ class Navigation:
         """The request a cancel now would stop: one accepted but not picked up yet, else the running one."""
         return self.pending_request() or self.request_id
 
+    def _mapping_guard(self) -> str | None:
+        """Why a goal cannot be sent in MAPPING now (None: it can)."""
+        m = self.mapping
+        if m is None:
+            return "this server has no mapping feature"
+        if not self.mapping_live():
+            return "the map is still being built: wait a second for SLAM's first map, then send the goal"
+        return None
+
     def _guard(self) -> str | None:
         if not self.localization.localized:
             return "not localized: set the initial pose or run global localization"
@@ -667,10 +720,13 @@ class Navigation:
                 self._cause = StopCause(StopReason.MAP_CHANGED, "operator", "active map changed")
                 self._abort("active map changed", now)
                 self._build_costmaps(arg)
+                self._live_generation = self.live_grid = None
             elif kind == "keepout":
                 self._apply_keepout(arg)
+            elif kind == "live":
+                self._apply_live_map(*arg)
             elif kind == "goals":
-                goals, controller, rid, actor, extends = arg
+                goals, controller, rid, actor, extends, in_mapping = arg
                 req = self._request
                 if extends and self._active and req is not None and req.id == rid:
                     # a click appended a goal: same request, the reached ones stay reached
@@ -696,6 +752,7 @@ class Navigation:
                 self._recovery_marks = ()  # markers are kept for the current navigation only
                 self._futures.clear()
                 self._active = True
+                self._in_mapping = in_mapping
                 self._notify("started", rid, goals=list(goals))
             elif kind == "cancel" and self._active:
                 self._cause = arg
@@ -708,10 +765,15 @@ class Navigation:
         self._update_costmaps(session, frame, now)
         self._track_walkers(session, frame, now)
         mode = session.modes.mode
-        if self._active and mode not in (Mode.NAVIGATING, Mode.RECOVERING):
+        driving_modes = (Mode.MAPPING,) if self._in_mapping else (Mode.NAVIGATING, Mode.RECOVERING)
+        if self._active and mode not in driving_modes:
             if self._cause is None:
                 self._cause = self._mode_cause(mode)
             self.navigator.cancel()  # the operator took over, e-stop, fault...
+        elif self._active and self._in_mapping and session.teleop_engaged(now):
+            if self._cause is None:
+                self._cause = StopCause(StopReason.TELEOP, "operator", "the operator drove by hand")
+            self.navigator.cancel()
         if not self._active:
             self._cmd = ZERO_TWIST
             return
@@ -799,7 +861,7 @@ class Navigation:
     def _track_walkers(self, session: Session, frame: SensorFrame, now: float) -> None:
         """Track walkers in the lidar's returns (map frame, placed like the costmaps' marks) and
         hand them, moved on to ``now``, to a controller that predicts them."""
-        if not self.localization.localized:
+        if not (self.localization.localized or self.mapping_live()):
             self.walkers.reset()
         elif frame.scan is not None:
             laser = session.pose.compose(self.localization.laser_pose)
@@ -883,7 +945,7 @@ class Navigation:
                 )
             self._seen_resets = loc.resets
             self.clear_costmaps()
-        if not loc.localized:
+        if not (loc.localized or self.mapping_live()):
             return  # scans placed with an unknown pose would mark obstacles in the wrong places
         if frame.scan is None:
             # The window follows the robot at scan rate (>= 5 Hz: a few cm of travel); moving it
@@ -1150,6 +1212,10 @@ def setup(runtime: Runtime) -> Navigation | None:
         log.warning("navigation needs the localization feature")
         return None
     nav = Navigation(runtime.session, loc)  # type: ignore[arg-type]
+    mapping = runtime.features.get("mapping")
+    if mapping is not None and hasattr(mapping, "add_grid_listener"):
+        nav.mapping = mapping
+        mapping.add_grid_listener(nav.on_live_map)
     runtime.session.add_stage(nav)
     runtime.pose_input_handlers["goal"] = nav.add_goal
     return nav

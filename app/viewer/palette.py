@@ -123,6 +123,8 @@ PEOPLE = (255, 140, 0)  # simulated people (orange discs)
 TEB_BAND = (255, 105, 180)  # TEB band poses (pink), apart from DWB samples (grey) and best (green)
 KEEPOUT_ZONE = (220, 30, 30)  # Nav2 keepout mask: red outlines
 SPEED_ZONE = (255, 190, 0)  # Nav2 speed mask: amber outlines
+FRONTIERS = (0, 230, 255)  # exploration frontier cells (cyan), over the grey map
+FRONTIER_GOAL = (255, 60, 255)  # the frontier being driven to
 
 # Behaviour colours, shared by the 3D view (ring + marker colour) and the dashboard's status panel
 # (frontend/js/behaviors.js holds the same table; a test keeps the two equal). Navigation itself is

@@ -1,6 +1,7 @@
 // Live page entry point: who am I, the robot, telemetry, the 3D view's first frame, feature modules.
 import { $, api, emitTelemetry, loadMe, message, perf, state, wsURL } from "./core.js";
 import * as control from "./control.js";
+import * as explore from "./explore.js";
 import * as gamepad from "./gamepad.js";
 import * as goals from "./goals.js";
 import * as joystick from "./joystick.js";
@@ -9,7 +10,7 @@ import * as status from "./status.js";
 import * as teleop from "./teleop.js";
 
 // Feature modules: each exports init(); add new ones here.
-const FEATURES = [status, teleop, joystick, gamepad, modes, goals, control];
+const FEATURES = [status, teleop, joystick, gamepad, modes, goals, control, explore];
 
 /** Server-side refusals and notices for this tab (a refused click in its 3D view, the new map frame). */
 function showNotices(t) {

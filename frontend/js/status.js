@@ -60,7 +60,10 @@ function render(t) {
   batt.className = h.battery_pct !== null && h.battery_pct !== undefined && h.battery_pct < 20 ? "bad-text" : "";
   const loc = t.localization || null;
   const locEl = $("#st-loc");
-  if (loc) {
+  if (t.mode === "mapping") { // AMCL is off while mapping: SLAM's pose is the estimate
+    locEl.textContent = "by SLAM (mapping)";
+    locEl.className = "ok-text";
+  } else if (loc) {
     const q = loc.quality !== undefined ? `${fmt(loc.quality * 100, 0)}%` : "?";
     locEl.textContent = `${loc.localized ? "localized" : loc.global_running ? "searching…" : "not localized"}, quality ${q}` +
       (loc.particles ? `, ${loc.particles} particles` : "");

@@ -1,0 +1,214 @@
+"""Navigate while mapping and explore with one click (issue 18): the server's session and features
+on a virtual clock with the simulated robot, no prior map; and the exploration API."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from app.commands.explore import build_explore_stack, load_world
+from app.features.exploration import ENDED, ExplorationRefused, ExplorationState
+from app.features.navigation import NavigationRefused
+from app.modes import Mode
+from bench.explore import compare
+from nav.types import Pose2D, Twist2D
+
+APARTMENT_START = Pose2D(3.0, 3.5, 0.0)
+
+
+def _stack(world: str = "apartment", start: Pose2D = APARTMENT_START):
+    return build_explore_stack(load_world(world), start, seed=3)
+
+
+def _run_until(stack, pred, limit: float) -> bool:
+    s = stack.session
+    t0 = s.clock.now()
+    while s.clock.now() - t0 < limit:
+        s.run_for(s.period)
+        if pred():
+            return True
+    return False
+
+
+def _known_free_goal(stack, near: Pose2D, at_least: float) -> Pose2D:
+    """A goal in the live costmap's free space at least ``at_least`` m from ``near`` (map frame)."""
+    cm = stack.navigation.global_costmap
+    rows, cols = np.nonzero(cm.costs == 0)
+    pts = cm.geometry.cell_to_world(rows, cols)
+    d = np.hypot(pts[:, 0] - near.x, pts[:, 1] - near.y)
+    ok = np.flatnonzero(d >= at_least)
+    assert ok.size, "no free cell that far in the map yet"
+    i = ok[np.argmin(d[ok])]
+    return Pose2D(float(pts[i, 0]), float(pts[i, 1]), 0.0)
+
+
+@pytest.mark.slow
+def test_exploring_the_apartment_maps_it_to_the_end():
+    stack = _stack()
+    s, ex = stack.session, stack.exploration
+    start_truth = stack.driver.truth_pose
+    try:
+        ex.start()
+        assert _run_until(stack, lambda: ex.state in ENDED, 1500.0), ex.status()
+        st = ex.status()
+        assert st["state"] == "complete", st
+        assert s.collisions == 0
+        assert s.modes.mode == Mode.IDLE  # mapping stopped at the end: the map is final
+        assert st["save_offered"] and st["goals_sent"] >= 2
+        events = [e for e in s.events if e["type"] == "mode"]
+        # one session: mapping from the start to the end, never navigating or recovering between
+        assert [e["to"] for e in events] == ["mapping", "idle"]
+        cmp = compare(stack.mapping.current_map(), stack.world, start_truth, APARTMENT_START)
+        assert cmp.explored >= 0.9, cmp
+        assert cmp.agreement >= 0.95, cmp
+    finally:
+        s.close()
+
+
+def test_goals_while_mapping_drive_without_leaving_mapping():
+    stack = _stack()
+    s, nav = stack.session, stack.navigation
+    try:
+        stack.mapping.start()
+        with pytest.raises(NavigationRefused, match="still being built"):
+            nav.set_goals([Pose2D(3.5, 3.5, 0.0)])  # before SLAM's first map
+        assert _run_until(stack, nav.mapping_live, 5.0)
+        goal = _known_free_goal(stack, s.pose, 1.5)
+        nav.set_goals([goal])
+        assert _run_until(stack, lambda: nav.last_outcome is not None and not nav.active, 120.0)
+        assert nav.last_outcome["kind"] == "reached", nav.last_outcome
+        assert s.modes.mode == Mode.MAPPING and stack.mapping.running
+        assert s.pose.distance_to(goal) < 0.3
+        assert s.collisions == 0
+        modes = [e["to"] for e in s.events if e["type"] == "mode"]
+        assert modes == ["mapping"]
+    finally:
+        s.close()
+
+
+def test_amcl_stays_off_while_mapping():
+    stack = _stack()
+    s = stack.session
+    try:
+        stack.mapping.start()
+        assert _run_until(stack, stack.navigation.mapping_live, 5.0)
+        s.run_for(2.0)
+        loc = stack.navigation.localization
+        assert loc.updates == 0  # SLAM localizes; the particle filter never ran
+    finally:
+        s.close()
+
+
+def test_driving_by_hand_takes_over_from_a_goal_while_mapping():
+    stack = _stack()
+    s, nav = stack.session, stack.navigation
+    try:
+        stack.mapping.start()
+        assert _run_until(stack, nav.mapping_live, 5.0)
+        nav.set_goals([_known_free_goal(stack, s.pose, 1.5)])
+        s.run_for(2.0)
+        assert nav.active
+        s.set_teleop(Twist2D(0.0, 0.0, 0.3), "operator")
+        s.run_for(0.2)
+        assert not nav.active
+        assert nav.last_outcome["kind"] == "cancelled" and nav.last_outcome["reason"] == "teleop"
+        assert s.modes.mode == Mode.MAPPING
+        for _ in range(20):  # the operator keeps the key down: their command drives now (ramped)
+            s.set_teleop(Twist2D(0.0, 0.0, 0.3), "operator")
+            s.run_for(s.period)
+        assert s.last_command.wz == pytest.approx(0.3)
+    finally:
+        s.close()
+
+
+def test_estop_interrupts_exploration_and_the_robot_stops():
+    stack = _stack()
+    s, ex = stack.session, stack.exploration
+    try:
+        ex.start()
+        assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
+        s.run_for(2.0)
+        s.estop("test")
+        s.run_for(0.2)
+        assert ex.state == ExplorationState.INTERRUPTED
+        assert "estop" in ex.reason
+        assert s.last_command.is_zero()
+        assert not stack.navigation.active
+    finally:
+        s.close()
+
+
+def test_time_budget_ends_exploration_and_offers_the_map():
+    stack = _stack()
+    s, ex = stack.session, stack.exploration
+    try:
+        ex.start(time_budget=8.0)
+        assert _run_until(stack, lambda: ex.state in ENDED, 12.0)
+        st = ex.status()
+        assert st["state"] == "time_budget" and st["time_left_s"] == 0.0
+        assert st["save_offered"]
+        assert s.modes.mode == Mode.IDLE
+        assert stack.mapping.current_map().data.size > 0
+    finally:
+        s.close()
+
+
+def test_stop_keeps_mapping_and_a_second_start_is_refused():
+    stack = _stack()
+    s, ex = stack.session, stack.exploration
+    try:
+        ex.start()
+        with pytest.raises(ExplorationRefused, match="already exploring"):
+            ex.start()
+        with pytest.raises(ValueError, match="positive"):
+            stack.exploration.start(time_budget=-1.0)
+        assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
+        assert ex.stop("tester")
+        s.run_for(0.2)
+        assert ex.state == ExplorationState.STOPPED and ex.reason == "stopped by tester"
+        assert s.modes.mode == Mode.MAPPING and not stack.navigation.active
+        assert not ex.stop()
+    finally:
+        s.close()
+
+
+def test_a_failed_frontier_goal_is_blacklisted_and_another_chosen():
+    stack = _stack()
+    s, ex, nav = stack.session, stack.exploration, stack.navigation
+    try:
+        ex.start()
+        assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
+        s.run_for(1.0)
+
+        def block() -> bool:  # the controller finds no way on (as if a door closed) until a goal fails
+            if nav.active and nav.navigator.state.value != "stuck":
+                nav.navigator.halt("NoValidControl", "test: blocked")
+            return ex.goals_failed >= 1
+
+        assert _run_until(stack, block, 60.0)
+        failed = ex.explorer.blacklist[-1]
+        assert _run_until(stack, lambda: ex._goal is not None, 10.0)
+        assert math.dist(ex._goal, failed) > ex.options.frontiers.blacklist_radius
+        assert ex.state == ExplorationState.EXPLORING
+    finally:
+        s.close()
+
+
+def test_exploration_api(client):
+    r = client.get("/api/exploration")
+    assert r.status_code == 200 and r.json()["state"] == "idle"
+    r = client.post("/api/exploration/start", json={"time_budget_s": -5})
+    assert r.status_code == 422
+    r = client.post("/api/exploration/stop")
+    assert r.status_code == 409 and r.headers["content-type"].startswith("application/problem+json")
+    r = client.post("/api/exploration/start", json={"time_budget_s": 600})
+    assert r.status_code == 200, r.text
+    body = r.json()
+    assert body["state"] == "exploring" and body["time_budget_s"] == 600
+    assert client.get("/api/robot").json()["mode"] == "mapping"
+    r = client.post("/api/exploration/start")
+    assert r.status_code == 409 and "already exploring" in r.json()["detail"]
+    r = client.post("/api/exploration/stop")
+    assert r.status_code == 200 and r.json()["state"] == "stopped"
