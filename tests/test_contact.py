@@ -157,9 +157,9 @@ def test_disc_depths_inside_and_outside_a_polygon() -> None:
 def test_random_keys_get_out_of_the_tightest_spot(world_name: str) -> None:
     """``contact.escape`` at CI size: pressed into the spot for 15 s (safety layer overridden), then
     random keys with the safety layer on: out within 60 s, and the base never sat still for 5 s
-    while keys were held (before the exact contact depths, apartment trials sat in a pocket
-    among the chair's legs until the limit, every key refused)."""
-    for seed in (0, 1):
+    while keys were held (with the sampled contact depths, apartment seed 2 sat in a pocket among
+    the chair's legs for 49 s until the limit, every key refused)."""
+    for seed in (0, 1, 2):
         r = escape_trial(world_name, seed)
         assert r.out, f"seed {seed}: not out after {r.seconds:.0f} s, stuck at {r.stuck}"
         assert r.longest_stall < 5.0, f"seed {seed}: {r.longest_stall:.1f} s without moving"
