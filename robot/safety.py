@@ -102,11 +102,6 @@ class SafetyOptions:
     """Use the IR sensors as an observation source. Default True."""
     base_shift_correction: bool = True
     """Move readings by the robot's motion since they were taken (collision_monitor default True)."""
-    blind_memory: float = 5.0
-    """s; a static reading the robot's own motion has carried closer to the lidar than its
-    ``range_min`` (where the lidar cannot see it: a chair leg touching the base's side) is kept this
-    long after it was last seen, and as long as the base reports a contact; 0 forgets it at once.
-    Default 5.0."""
 
     def __post_init__(self) -> None:
         for name in ("stop_margin", "slowdown_margin"):
@@ -123,8 +118,6 @@ class SafetyOptions:
             raise SafetyConfigError(
                 f"SafetyOptions.slowdown_ratio must be in [0, 1], got {self.slowdown_ratio}"
             )
-        if not (math.isfinite(self.blind_memory) and self.blind_memory >= 0):
-            raise SafetyConfigError(f"SafetyOptions.blind_memory must be >= 0 s, got {self.blind_memory!r}")
         for name in ("time_before_collision", "simulation_time_step", "source_timeout", "ir_timeout"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
@@ -215,8 +208,6 @@ class SafetyFilter:
         # state between frames
         self._scan_pts = np.zeros((0, 2))  # base_link at the scan's stamp
         self._scan_vel = np.zeros((0, 2))  # predicted velocity of each reading, same frame
-        self._scan_seen = np.zeros(0)  # when each reading was last seen by the lidar
-        self._lidar_xy = np.array([spec.mount_x, spec.mount_y])
         # walkers between scans (base frame at each scan's stamp)
         self.walkers = WalkerTracker()
         # walkers are followed this far: within the approach horizon they can reach the footprint
@@ -261,17 +252,12 @@ class SafetyFilter:
             pts = self._mount.transform_points(pts) if pts.size else np.zeros((0, 2))
             vel = self.walkers.update(pts, scan.stamp, self._scan_shift.inverse())
             keep = (np.hypot(pts[:, 0], pts[:, 1]) <= self._scan_reach) | vel.any(axis=1)
-            blind, blind_seen = self._blind_readings(now, scan.range_min, frame.collision)
+            self._scan_pts, self._scan_vel = pts[keep], vel[keep]
             self._scan_stamp = scan.stamp
             self._scan_shift = Pose2D()
             lag = now - scan.stamp
             if o.base_shift_correction and lag > 0 and not self._last_out.is_zero():
                 self._scan_shift = integrate_twist(Pose2D(), self._last_out, lag)
-            self._scan_pts = np.vstack((pts[keep], self._scan_shift.transform_points(blind)))
-            self._scan_vel = np.vstack((vel[keep], np.zeros_like(blind)))
-            self._scan_seen = np.concatenate((np.full(int(keep.sum()), scan.stamp), blind_seen))
-        elif frame.collision and self._scan_seen.size:
-            self._scan_seen = np.maximum(self._scan_seen, now)  # touching: what was seen near is there
         ir = frame.ir
         if o.use_ir and ir is not None and self._ir_xy.shape[0]:
             trig = np.asarray(ir.triggered, dtype=bool)
@@ -282,23 +268,6 @@ class SafetyFilter:
             self._ir_src = k
             self._ir_stamp = ir.stamp
             self._ir_shift = Pose2D()
-
-    def _blind_readings(self, now: float, range_min: float, contact: bool) -> tuple[np.ndarray, np.ndarray]:
-        """The held static readings (current base frame) that the robot's motion has carried inside
-        the lidar's ``range_min``, where a new scan cannot see them, and when each was last seen:
-        a leg the base was pushed against stays a reading (so the stop zone and the dashboard's
-        ``free`` list know it), until ``blind_memory`` s after it was last seen, longer while the
-        base reports a contact. Walkers' readings are not held (they move on)."""
-        if not self._scan_pts.shape[0] or self.options.blind_memory <= 0:
-            return np.zeros((0, 2)), np.zeros(0)
-        pts = self._scan_shift.inverse().transform_points(self._scan_pts)
-        seen = np.full(len(pts), now) if contact else self._scan_seen
-        blind = (
-            (np.hypot(*(pts - self._lidar_xy).T) < range_min)
-            & ~self._scan_vel.any(axis=1)
-            & (now - seen <= self.options.blind_memory)
-        )
-        return pts[blind], seen[blind]
 
     def _readings(self, now: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Readings in the current base frame near the robot: points (N, 2), weights (N,), source

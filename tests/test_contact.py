@@ -29,7 +29,7 @@ from nav.walkers import PERSON_RADIUS, WalkerTracker
 from robot.base import SensorFrame
 from robot.clock import VirtualClock
 from robot.profiles import load_profile
-from robot.safety import SafetyFilter, SafetyOptions
+from robot.safety import SafetyFilter
 from robot.sim import SimDriver, SimOptions, World
 from robot.sim.contact import cell_depths, disc_depths
 
@@ -517,36 +517,3 @@ def test_a_turn_that_presses_a_touching_leg_in_is_neither_offered_nor_passed() -
     assert abs(right.wz) < 0.1 and reason is not None
     left, _ = f(Twist2D(0.0, 0.0, 0.8), SensorFrame(stamp=0.1))
     assert left.wz > 0.7
-
-
-def test_a_leg_carried_into_the_lidars_blind_zone_is_still_a_reading() -> None:
-    """A leg face 7.5 mm off the base's left side, 0.154-0.165 m from the lidar (range_min 0.15 m):
-    seen. The base drives 3 cm forward along it (not in its path); now it is 0.134-0.143 m from the
-    lidar and no scan returns it. The filter still holds it: the dashboard's ``free`` list does not
-    offer the left turn that would sweep the side into it, and it is the nearest reading. It is
-    forgotten ``blind_memory`` s after it was last seen, unless the base reports a contact. Before,
-    the leg vanished with the next scan and every motion was offered."""
-
-    def blind_leg(options: SafetyOptions) -> SafetyFilter:
-        f = SafetyFilter(SKID4, options)
-        leg = np.column_stack((np.linspace(0.11, 0.125, 4), np.full(4, 0.1075)))
-        f(Twist2D(0.2, 0.0, 0.0), SensorFrame(stamp=0.0, scan=points_scan(0.0, leg)))
-        for k in (1, 2):
-            assert f(Twist2D(0.2, 0.0, 0.0), SensorFrame(stamp=0.05 * k)) == (Twist2D(0.2, 0.0, 0.0), None)
-        f(Twist2D(), SensorFrame(stamp=0.15, scan=points_scan(0.15, np.zeros((0, 2)))))
-        return f
-
-    f = blind_leg(SafetyOptions())
-    free = f.free_motions(0.15)
-    assert not free["turn left"] and free["turn right"] and free["back"]
-    assert f.nearest_reading(0.15) < 0.01
-    empty = np.zeros((0, 2))
-    f(Twist2D(), SensorFrame(stamp=3.0, scan=points_scan(3.0, empty)))
-    assert not f.free_motions(3.0)["turn left"]  # within blind_memory of the last sighting
-    f(Twist2D(), SensorFrame(stamp=5.5, scan=points_scan(5.5, empty)))
-    assert f.free_motions(5.5)["turn left"] and f.nearest_reading(5.5) == math.inf
-    touching = blind_leg(SafetyOptions())
-    for t in (3.0, 5.5, 9.0):
-        touching(Twist2D(), SensorFrame(stamp=t, scan=points_scan(t, empty), collision=True))
-    assert not touching.free_motions(9.0)["turn left"]  # held while the base reports a contact
-    assert blind_leg(SafetyOptions(blind_memory=0.0)).free_motions(0.15)["turn left"]
