@@ -14,8 +14,10 @@ footprint polygon and each person's disc's reach into it must stay within what i
 ``SimOptions.contact_skin``, whichever is more. So a robot in contact can back out, turn away or
 slide along what it touches, also with a chair leg on each side; one already overlapping something
 (a person stepped into it, a teleport, an obstacle added under it) can leave it; pushing on never
-gets further in. When no motion qualifies the body stays and the motors stall (velocity zero, wheels do not
-turn).
+gets further in. When no motion qualifies the body stays and the motors stall (velocity zero,
+wheels do not turn). The contact itself is still detected at the footprint's sample points (fast
+enough for every substep), so a cell's corner may poke up to half the edge spacing in between them
+unreported.
 """
 
 from __future__ import annotations
