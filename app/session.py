@@ -182,6 +182,9 @@ class Session:
         self._teleop_disarmed: set[str] = set()
         self._lock = threading.Lock()
         self._trail: deque[tuple[float, float]] = deque(maxlen=options.trail_length)
+        # the trail as an array, rebuilt only when it changes: one copy per new point, not per tick
+        # (the 3D view also redraws the trail only when the snapshot's array is a new object)
+        self._trail_array: np.ndarray | None = None
         self._seq = 0
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
@@ -457,6 +460,7 @@ class Session:
             >= self.options.trail_min_step
         ):
             self._trail.append((self.pose.x, self.pose.y))
+            self._trail_array = None
         if frame.scan is not None:
             self.last_scan = frame.scan
             self.last_scan_time = now
@@ -554,7 +558,7 @@ class Session:
             laser_pose=Pose2D(
                 self.profile.lidar.mount_x, self.profile.lidar.mount_y, self.profile.lidar.mount_yaw
             ),
-            trail=np.asarray(self._trail) if self._trail else None,
+            trail=self._trail_points(),
             grid=self.grid,
             grid_version=self.grid_version,
             health=self.health(now),
@@ -593,6 +597,15 @@ class Session:
         """Forget the trail (loop thread only): the pose jumped to a new estimate or map frame, and the
         old points would draw a line the robot never drove."""
         self._trail.clear()
+        self._trail_array = None
+
+    def _trail_points(self) -> np.ndarray | None:
+        if not self._trail:
+            return None
+        if self._trail_array is None:
+            self._trail_array = np.asarray(self._trail)
+            self._trail_array.flags.writeable = False  # shared by every snapshot until the next point
+        return self._trail_array
 
     def set_grid(self, grid: OccupancyGrid | None) -> None:
         self.grid = grid

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from app.modes import Mode
@@ -159,3 +160,20 @@ def test_command_beyond_sanity_bound_is_refused_and_stops(cmd: Twist2D, componen
             s.set_teleop(cmd, "test")
         s.run_for(s.period)
     assert sum(e["type"] == "refused" for e in s.events) == 1
+
+
+def test_the_trail_is_one_array_until_it_gains_a_point() -> None:
+    """Standing still, every snapshot carries the same read-only trail array (it used to be copied
+    from the deque on every tick, and the 3D view, which redraws the trail when the array is a new
+    object, redrew it at every snapshot); driving on adds points and gives a new array."""
+    s = make_session()
+    s.request_mode(Mode.TELEOP)
+    drive(s, Twist2D(0.2, 0.0, 0.0), 1.0)
+    drive(s, Twist2D(), 1.0)
+    still = s.bus.latest.trail
+    drive(s, Twist2D(), 0.5)
+    assert s.bus.latest.trail is still and not still.flags.writeable
+    drive(s, Twist2D(0.2, 0.0, 0.0), 1.0)
+    moved = s.bus.latest.trail
+    assert moved is not still and len(moved) > len(still)
+    assert np.allclose(moved[: len(still)], still) or len(moved) == s.options.trail_length

@@ -17,6 +17,7 @@ from app.commands.sim_nav import build_sim_stack
 from app.features import safety as safety_feature
 from app.runtime import Runtime
 from app.telemetry import snapshot_dict
+from bench.contact import TIGHT_SPOTS, escape_trial
 from nav.behaviors.base import BehaviorContext, Status
 from nav.behaviors.spin import Spin, SpinOptions
 from nav.control.errors import ControllerError, NoValidControl
@@ -30,6 +31,7 @@ from robot.clock import VirtualClock
 from robot.profiles import load_profile
 from robot.safety import SafetyFilter
 from robot.sim import SimDriver, SimOptions, World
+from robot.sim.contact import cell_depths, disc_depths
 
 QUIET = SimOptions(slip_noise_std=0.0, lidar_noise=False, gyro_noise=False, ir_stop=False)
 # A 0.51 x 0.43 m rectangular base (issue 16's cylinder-field robot)
@@ -83,6 +85,84 @@ def test_an_overlapping_base_can_leave_but_never_goes_deeper() -> None:
     step(d, clock, Twist2D(-0.15, 0.0, 0.0), 2.0)
     assert d.truth_pose.x < 2.0 - 0.1  # backed out
     assert not d.body.collides(world, d.truth_pose)
+
+
+# A pocket among the apartment's dining-chair legs where random keys left the base for good: the
+# leg's cell pokes its corner ~1 cm into the base's right edge between two edge samples.
+POCKET = Pose2D(3.5446, 1.8158, 2.0872)
+SKID4 = load_profile("skid4")
+
+
+@pytest.mark.parametrize(
+    ("cmd", "freed"),
+    [
+        (Twist2D(0.0, 0.0, 0.8), "turns"),
+        (Twist2D(-0.15, 0.0, 0.0), "moves"),
+        (Twist2D(0.15, 0.0, 0.0), "moves"),
+    ],
+)
+def test_a_base_with_a_leg_corner_in_its_edge_turns_away_backs_out_and_slides_along(cmd, freed) -> None:
+    """Turning away, backing out and sliding along the leg each move the base, and the leg never
+    gets deeper. With the depth sampled at footprint points (a sample inside the cell's corner
+    reads min(dx, dy), which grows as the body slides or turns) the turn stopped after 0.03 rad
+    and backing or driving moved it less than a millimetre: trapped."""
+    clock = VirtualClock()
+    d = SimDriver(
+        World.stock("apartment"), load_profile("skid4"), clock, seed=0, start_pose=POCKET, options=QUIET
+    )
+    deep0, _ = d.body.penetration(d.world, POCKET)
+    assert deep0 > 0.0  # pressed in
+    step(d, clock, cmd, 1.0)
+    p = d.truth_pose
+    if freed == "turns":
+        assert p.theta - POCKET.theta > 0.5
+    else:
+        assert math.hypot(p.x - POCKET.x, p.y - POCKET.y) > 0.1
+    assert d.body.penetration(d.world, p)[0] <= max(deep0, d.options.contact_skin) + 1e-9
+
+
+def test_the_turn_into_the_leg_is_refused() -> None:
+    clock = VirtualClock()
+    d = SimDriver(
+        World.stock("apartment"), load_profile("skid4"), clock, seed=0, start_pose=POCKET, options=QUIET
+    )
+    deep0, _ = d.body.penetration(d.world, POCKET)
+    assert step(d, clock, Twist2D(0.0, 0.0, -0.8), 1.0) > 0
+    assert d.body.penetration(d.world, d.truth_pose)[0] <= deep0 + 1e-9
+
+
+def test_cell_depths_are_the_exact_overlap_of_polygon_and_cell() -> None:
+    """Cell units: a unit square at the origin against a square sticking 0.1 into it from the
+    left, a diamond whose corner pokes 0.2 into it (the corner between any two edge samples), and
+    one clear of it."""
+    cells = np.array([[0.0, 0.0]])
+    left = np.array([[-2.0, 0.2], [0.1, 0.2], [0.1, 0.8], [-2.0, 0.8]])
+    assert np.allclose(cell_depths(left, cells), [0.1])
+    diamond = np.array([[0.5, 1.2], [-0.5, 2.2], [0.5, 3.2], [1.5, 2.2]]) - [0.0, 0.4]  # tip at y 0.8
+    assert np.allclose(cell_depths(diamond, cells), [0.2])
+    clear = left - [0.2, 0.0]
+    assert np.allclose(cell_depths(clear, cells), [0.0])
+
+
+def test_disc_depths_inside_and_outside_a_polygon() -> None:
+    square = np.array([[1.0, 1.0], [-1.0, 1.0], [-1.0, -1.0], [1.0, -1.0]])
+    centres = np.array(
+        [[1.2, 0.0], [0.8, 0.0], [1.0 + 0.3 / math.sqrt(2) + 0.1, 1.0 + 0.3 / math.sqrt(2) + 0.1]]
+    )
+    assert np.allclose(disc_depths(square, centres, np.full(3, 0.3)), [0.1, 0.5, 0.0])
+
+
+# --------------------------------------------------------------- random keys out of the tightest spots
+@pytest.mark.parametrize("world_name", sorted(TIGHT_SPOTS))
+def test_random_keys_get_out_of_the_tightest_spot(world_name: str) -> None:
+    """``contact.escape`` at CI size: pressed into the spot for 15 s (safety layer overridden), then
+    random keys with the safety layer on: out within 60 s, and the base never sat still for 5 s
+    while keys were held (with the sampled contact depths, apartment seed 2 sat in a pocket among
+    the chair's legs for 49 s until the limit, every key refused)."""
+    for seed in (0, 1, 2):
+        r = escape_trial(world_name, seed)
+        assert r.out, f"seed {seed}: not out after {r.seconds:.0f} s, stuck at {r.stuck}"
+        assert r.longest_stall < 5.0, f"seed {seed}: {r.longest_stall:.1f} s without moving"
 
 
 # ------------------------------------------------------------------------------- swept rotations
@@ -164,12 +244,6 @@ def test_swept_poses_bound_the_motion_between_samples() -> None:
 
 
 # --------------------------------------------------------------------- the tightest spot of each world
-# (world, pose to drive in from, command that presses into the spot)
-TIGHT_SPOTS = {
-    "apartment": (Pose2D(3.3, 1.72, 0.0), Twist2D(0.2, 0.0, 0.35)),  # between the chair's legs
-    "office": (Pose2D(2.3, 9.6, -1.92), Twist2D(0.2, 0.0, 0.0)),  # a doorframe's corner
-    "greenhouse": (Pose2D(8.0, 6.2, -1.1), Twist2D(0.2, 0.0, 0.0)),  # nose into a plant row
-}
 ESCAPES = {
     "back": Twist2D(-0.15, 0.0, 0.0),
     "turn left": Twist2D(0.0, 0.0, 0.8),
@@ -181,7 +255,7 @@ ESCAPES = {
 def press_into(session, world_name: str) -> Pose2D:
     """Teleop into the spot with the safety layer and the base's IR stop off (an obstacle the
     sensors do not see, or an operator's override), until the base reports contact for 2 s."""
-    start, push = TIGHT_SPOTS[world_name]
+    start, push = TIGHT_SPOTS[world_name].start, TIGHT_SPOTS[world_name].push
     session.driver.options = dataclasses.replace(session.driver.options, ir_stop=False)
     session.driver.teleport(start)
     safety = session.safety
@@ -245,7 +319,7 @@ def test_navigation_gets_out_of_the_tightest_spot(world_name: str) -> None:
     safety layer on, as the server wires it) is reached without the robot staying in contact."""
     world = World.stock(world_name)
     stack = build_sim_stack(
-        world.grid, world, TIGHT_SPOTS[world_name][0], localization="truth", controller="dwa"
+        world.grid, world, TIGHT_SPOTS[world_name].start, localization="truth", controller="dwa"
     )
     s = stack.session
     try:

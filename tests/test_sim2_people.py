@@ -11,7 +11,7 @@ from nav.types import Pose2D, Twist2D
 from robot.clock import VirtualClock
 from robot.profiles import load_profile
 from robot.sim import SimDriver, SimOptions, World
-from robot.sim.people import Crowd, PeopleError
+from robot.sim.people import GIVE_WAY_S, Crowd, PeopleError
 
 QUIET = SimOptions(slip_noise_std=0.0, lidar_noise=False, gyro_noise=False)
 
@@ -150,3 +150,23 @@ def test_populate_places_walkers_in_free_space_away_from_the_robot() -> None:
     assert all(0.5 <= p.speed <= 1.2 and p.behaviour == "random" for p in world.people.list())
     with pytest.raises(PeopleError, match="clearance"):
         World.box(1.0, 1.0).people.populate(1, rng, clearance=2.0)
+
+
+def test_a_walker_kept_waiting_by_the_robot_turns_back() -> None:
+    """A walker on an aisle loop meets a robot standing in the aisle: it waits (never steps into the
+    robot) and after ``GIVE_WAY_S`` turns back the way it came. It used to wait for good, and a robot
+    waiting for the walker then waited for good too (a greenhouse family trial ended PatienceExceeded
+    with the two face to face for 80 s)."""
+    world = World.box(12.0, 3.0)
+    crowd = world.people
+    crowd.robot_radius = 0.16
+    crowd.add_loop([[1.0, 1.5], [11.0, 1.5]], speed=1.0)
+    robot = Pose2D(6.0, 1.5, math.pi)
+    xs = []
+    for _ in range(round((4.5 + GIVE_WAY_S + 2.0) / 0.04)):
+        crowd.step(0.04, robot)
+        xs.append(float(crowd.xy[0, 0]))
+        assert math.hypot(crowd.xy[0, 0] - 6.0, crowd.xy[0, 1] - 1.5) >= 0.15 + 0.16 - 1e-9
+    closest = max(xs)
+    assert closest > 6.0 - 0.15 - 0.16 - 0.05  # it came up to the robot and waited there
+    assert xs[-1] < closest - 1.5  # then walked back towards (1, 1.5)

@@ -12,6 +12,9 @@ speed; only when one arrives does its behaviour (a small Python object) choose t
 the per-substep cost is a handful of numpy operations whatever the number of people. A person never
 walks into the robot: a step that would overlap the robot's circumscribed circle is not taken (the
 person waits), so every contact between them is the robot's doing and is reported as its collision.
+A walker kept waiting by the robot for ``GIVE_WAY_S`` turns back the way it came (a loop walker
+reverses along its loop, a wanderer picks a new goal), as people do in an aisle a robot blocks:
+waiting forever for a robot that waits for them deadlocked both (issue 16, a greenhouse aisle).
 People do not avoid each other (they may pass through one another).
 """
 
@@ -35,6 +38,8 @@ PERSON_RADIUS = 0.15
 """Metres: a person seen at lidar height (legs / hips) as a 0.3 m disc."""
 MIN_SPEED, MAX_SPEED = 0.5, 1.2
 """m/s: walking speeds people are given (slow stroll to brisk walk)."""
+GIVE_WAY_S = 3.0
+"""s a walker waits for the robot to clear its way before it turns back."""
 
 
 class PeopleError(ValueError):
@@ -63,11 +68,20 @@ class Loop:
     def __init__(self, waypoints: np.ndarray) -> None:
         self.waypoints = np.asarray(waypoints, dtype=float).reshape(-1, 2)
         self._k = 0
+        self._step = 1  # walking the loop forwards (1) or backwards (-1)
 
     def next_target(self, crowd: Crowd, i: int) -> np.ndarray | None:
         if len(self.waypoints) < 2:
             return None  # a single waypoint: stand there
-        self._k = (self._k + 1) % len(self.waypoints)
+        self._k = (self._k + self._step) % len(self.waypoints)
+        return self.waypoints[self._k]
+
+    def turn_back(self, crowd: Crowd, i: int) -> np.ndarray | None:
+        """Walk the loop the other way, starting with the waypoint just left."""
+        if len(self.waypoints) < 2:
+            return None
+        self._k = (self._k - self._step) % len(self.waypoints)
+        self._step = -self._step
         return self.waypoints[self._k]
 
     def update(self, crowd: Crowd, i: int, robot: Pose2D, now: float) -> None:
@@ -108,6 +122,10 @@ class RandomWalk:
         if not ok.any():
             return None  # boxed in: wait and try again next arrival
         return cand[int(np.argmax(ok))]
+
+    def turn_back(self, crowd: Crowd, i: int) -> np.ndarray | None:
+        """Blocked by the robot: wander somewhere else (a new random goal)."""
+        return self.next_target(crowd, i)
 
     def update(self, crowd: Crowd, i: int, robot: Pose2D, now: float) -> None:
         return None
@@ -202,6 +220,7 @@ class Crowd:
         self.radius = np.zeros(0)
         self.heading = np.zeros(0)
         self.walking = np.zeros(0, dtype=bool)
+        self.waited = np.zeros(0)  # s each walker has been kept waiting by the robot
         self.ids: list[int] = []
         self.behaviours: list[Behaviour] = []
         self.time = 0.0
@@ -253,6 +272,7 @@ class Crowd:
         self.radius = np.append(self.radius, radius)
         self.heading = np.append(self.heading, 0.0)
         self.walking = np.append(self.walking, False)
+        self.waited = np.append(self.waited, 0.0)
         self._arrive(len(self.ids) - 1)
         self._reindex()
         return pid
@@ -310,7 +330,7 @@ class Crowd:
         keep = np.arange(len(self.ids)) != i
         del self.ids[i]
         del self.behaviours[i]
-        for name in ("xy", "target", "speed", "radius", "heading", "walking"):
+        for name in ("xy", "target", "speed", "radius", "heading", "walking", "waited"):
             setattr(self, name, getattr(self, name)[keep])
         self._reindex()
 
@@ -384,6 +404,20 @@ class Crowd:
         arrived = np.flatnonzero(self.walking & ~blocked & (frac >= 1.0))
         for i in arrived:
             self._arrive(int(i))
+        self.waited = np.where(self.walking & blocked, self.waited + dt, 0.0)
+        for i in np.flatnonzero(self.waited >= GIVE_WAY_S):
+            self._give_way(int(i))
+
+    def _give_way(self, i: int) -> None:
+        """Walker ``i`` has waited ``GIVE_WAY_S`` for the robot: it turns back (its behaviour's
+        ``turn_back``; a behaviour without one, e.g. a step-in person, keeps waiting)."""
+        self.waited[i] = 0.0
+        turn_back = getattr(self.behaviours[i], "turn_back", None)
+        if turn_back is None:
+            return
+        nxt = turn_back(self, i)
+        if nxt is not None:
+            self.target[i] = nxt
 
     # ------------------------------------------------------------------------------- sensing
     @_locked

@@ -9,13 +9,15 @@ less than their encoders claim). The new pose is accepted if every sample point 
 footprint lies in a free cell. Otherwise a collision (contact) is reported and the body still takes
 the first of these motions that does not deepen the contact: the whole substep, its rotation alone,
 its translation alone (a base pushed against a post slides along it or turns away). "Deepen" is
-measured by the penetration depth, the deepest footprint sample's distance inside an obstacle (the
-exact distance to the nearest free cell, or into a person's disc): a motion is taken when its depth
-is no larger than the current pose's (0 for a robot that only touches). So a robot in contact can
-back out, turn away or slide along what it touches; one already overlapping something (a person
-stepped into it, a teleport, an obstacle added under it) can leave it; pushing on never gets further
-in. When no motion qualifies the body stays and the motors stall (velocity zero, wheels do not
-turn).
+judged contact by contact (``robot/sim/contact.py``): each occupied cell's exact overlap with the
+footprint polygon and each person's disc's reach into it must stay within what it is now or
+``SimOptions.contact_skin``, whichever is more. So a robot in contact can back out, turn away or
+slide along what it touches, also with a chair leg on each side; one already overlapping something
+(a person stepped into it, a teleport, an obstacle added under it) can leave it; pushing on never
+gets further in. When no motion qualifies the body stays and the motors stall (velocity zero,
+wheels do not turn). The contact itself is still detected at the footprint's sample points (fast
+enough for every substep), so a cell's corner may poke up to half the edge spacing in between them
+unreported.
 """
 
 from __future__ import annotations
@@ -28,7 +30,12 @@ import numpy as np
 from nav.types import Pose2D, Twist2D
 from robot.kinematics import integrate_twist
 from robot.profiles import RobotProfile
+from robot.sim.contact import ContactProbe, convex_outline
 from robot.sim.world import World, points_in_polygon
+
+_MAX_SUBSTEP_MOTION = 0.05
+"""m; a bound on how far a footprint point moves in one physics substep (2 m/s x 10 ms with room to
+spare): the static cells a contact probe gathers reach this far beyond the footprint."""
 
 
 @dataclass(frozen=True)
@@ -62,9 +69,9 @@ class SimOptions:
     """Metres between interior sample points (no coarser than the map resolution, so a cell lying
     wholly inside the footprint, e.g. after a teleport, is caught too). Default 0.05."""
     contact_skin: float = 0.002
-    """Metres of penetration, deepest and summed over the footprint samples, a body in contact may
-    take (a bumper's compliance). Zero tolerance makes thin pockets between posts where every
-    motion touches by a fraction of a millimetre: the robot is trapped. Default 0.002."""
+    """Metres of penetration into any one obstacle cell or person a body in contact may take (a
+    bumper's compliance): the slack that lets a body slide along what it touches despite noise and
+    the grid's steps. Default 0.002."""
 
     def __post_init__(self) -> None:
         positive = (
@@ -105,52 +112,6 @@ def footprint_samples(
     grid = np.column_stack((gx.ravel(), gy.ravel()))
     interior = grid[points_in_polygon(grid, poly)] if grid.size else np.zeros((0, 2))
     return np.vstack([*edges, interior])
-
-
-_DEPTH_WINDOW = 4
-"""Cells around a penetrating sample searched for free space; deeper reads this many cells."""
-
-
-def static_depth(world: World, xy: np.ndarray) -> np.ndarray:
-    """Penetration (m) of each of the (N, 2) world points into the world's static obstacle cells:
-    for a point in an occupied cell, the exact distance to the nearest free cell (taken as a
-    square), at most ``_DEPTH_WINDOW`` cells; 0 for points in free cells."""
-    g = world.geometry
-    local = g.origin.inverse().transform_points(np.asarray(xy, dtype=float).reshape(-1, 2)) / g.resolution
-    out = np.zeros(len(local))
-    cells = np.floor(local).astype(np.int64)
-    rows, cols = cells[:, 1], cells[:, 0]
-    inside = g.in_bounds(rows, cols)
-    occ = world.static_occupied
-    hit = np.zeros(len(local), dtype=bool)
-    hit[inside] = occ[rows[inside], cols[inside]]
-    if not hit.any():
-        return out
-    k = _DEPTH_WINDOW
-    r0, c0 = int(rows[hit].min()) - k, int(cols[hit].min()) - k
-    r1, c1 = int(rows[hit].max()) + k + 1, int(cols[hit].max()) + k + 1
-    window = np.zeros((r1 - r0, c1 - c0), dtype=bool)  # off the grid counts as free
-    rr0, cc0, rr1, cc1 = max(r0, 0), max(c0, 0), min(r1, g.height), min(c1, g.width)
-    window[rr0 - r0 : rr1 - r0, cc0 - c0 : cc1 - c0] = occ[rr0:rr1, cc0:cc1]
-    fr, fc = np.nonzero(~window)
-    if len(fr) == 0:
-        out[hit] = k * g.resolution
-        return out
-    u, v = local[hit, 0:1], local[hit, 1:2]  # (H, 1) continuous column, row
-    fc, fr = fc[None, :] + c0, fr[None, :] + r0  # (1, F) free cells: squares [c, c+1) x [r, r+1)
-    dx = np.maximum(np.maximum(fc - u, u - (fc + 1)), 0.0)
-    dy = np.maximum(np.maximum(fr - v, v - (fr + 1)), 0.0)
-    out[hit] = np.minimum(np.sqrt(dx * dx + dy * dy).min(axis=1), k) * g.resolution
-    return out
-
-
-def people_depth(world: World, xy: np.ndarray) -> np.ndarray:
-    """Penetration (m) of each of the (N, 2) world points into the people's discs (0 outside)."""
-    crowd = world.people
-    if not len(crowd):
-        return np.zeros(len(xy))
-    d = np.hypot(xy[:, None, 0] - crowd.xy[None, :, 0], xy[:, None, 1] - crowd.xy[None, :, 1])
-    return np.maximum((crowd.radius[None, :] - d).max(axis=1), 0.0)
 
 
 class NormalStream:
@@ -197,6 +158,7 @@ class SimBody:
             profile.footprint_polygon(32), options.footprint_spacing, options.footprint_interior_spacing
         )
         self._reach = float(np.max(np.hypot(self.samples[:, 0], self.samples[:, 1])))
+        self.outline = convex_outline(profile.footprint_polygon(32))
         self.last_hit: str | None = None  # what the latest collision was with
         self._rest: tuple[Pose2D, int] | None = None  # (pose, world version) verified free at rest
         self.last_accel = (0.0, 0.0)
@@ -220,26 +182,27 @@ class SimBody:
         return False
 
     def penetration(self, world: World, pose: Pose2D) -> tuple[float, float]:
-        """(deepest, total) penetration (m) of the footprint samples at ``pose`` into obstacles and
-        people; (0, 0) when free."""
-        pts = pose.transform_points(self.samples)
-        d = np.maximum(static_depth(world, pts), people_depth(world, pts))
-        return float(d.max()), float(d.sum())
+        """(deepest, total) penetration (m) of the footprint at ``pose`` into obstacle cells and
+        people (``robot.sim.contact``); (0, 0) when free."""
+        static, people = ContactProbe(world, self.outline, pose, self._reach).depths(pose)
+        d = np.concatenate((static, people))
+        return (float(d.max()), float(d.sum())) if len(d) else (0.0, 0.0)
 
     def _contact_motion(self, world: World, body: Twist2D, dt: float) -> tuple[Pose2D, Twist2D] | None:
         """After the whole substep ``body`` touched something: the first of (the whole motion, its
-        rotation alone, its translation alone) that does not press further in than the current pose,
-        as (pose, the part of ``body`` taken); None if all of them would."""
-        deep0, total0 = self.penetration(world, self.pose)
+        rotation alone, its translation alone) that takes no contact deeper than it is now or than
+        the contact skin, whichever is more, as (pose, the part of ``body`` taken); None if every
+        one of them would press something further in. Contact by contact: a base touching two chair
+        legs may leave one and slide along the other."""
+        probe = ContactProbe(world, self.outline, self.pose, self._reach + _MAX_SUBSTEP_MOTION)
         skin = self.options.contact_skin
-        deep_ok, total_ok = max(deep0, skin) + 1e-12, max(total0, skin) + 1e-12
+        limit = [np.maximum(d, skin) + 1e-12 for d in probe.depths(self.pose)]
         parts = (body, Twist2D(0.0, 0.0, body.wz), Twist2D(body.vx, body.vy, 0.0))
         for k, part in enumerate(parts):
             if k and part.is_zero():
                 continue
             pose = integrate_twist(self.pose, part, dt)
-            deep, total = self.penetration(world, pose)
-            if deep <= deep_ok and total <= total_ok:
+            if all(np.all(d <= lim) for d, lim in zip(probe.depths(pose), limit, strict=True)):
                 return pose, part
         return None
 
