@@ -27,7 +27,14 @@ from nav.slam.loop_closure import (
     observed_fraction,
     proposals_agree,
 )
-from nav.slam.matcher import RefineOptions, ScanMatchError, SearchWindow, match_scan
+from nav.slam.matcher import (
+    RefineOptions,
+    ScanMatchError,
+    SearchWindow,
+    fuse_with_prediction,
+    match_scan,
+    translation_information,
+)
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
 from nav.slam.render import render_submaps
 from nav.slam.submap import Submap
@@ -104,6 +111,14 @@ class SlamOptions:
     once, not per candidate (which would favour poses that put them onto mapped cells): at the
     prediction, or at a first match with all points when that lands more than a cell / 1 deg
     away (slip, lagging odometry); then the scan is matched again from the prediction."""
+    degeneracy_threshold: float = 0.03
+    """Front end: a direction in which the scan's surface normals give less than about this
+    fraction of the information of its best-constrained direction takes the position along it
+    from the odometry prediction, not from the match (:func:`nav.slam.matcher.fuse_with_prediction`,
+    smooth: half-way at the threshold, the match >= 92 % at 0.1). In an aisle between rows longer
+    than the lidar's range (the stock greenhouse) or a corridor whose ends are out of range the
+    match's score is flat along it, and its noise used to move the robot along the aisle (issue
+    16); 0 = off (the match alone, as before)."""
     search_levels: int = 0
     """Front-end coarse-to-fine levels over max-pooled fields (0 = exhaustive search); 2 cost 25 %
     less at equal accuracy on FR079's first 1600 scans (not yet measured on the full logs)."""
@@ -422,6 +437,9 @@ class GraphSlam:
             wide_pose, wide_score = match_scan(field, pts, prior, self._wide_window, self._refine)
             if wide_score > score:
                 pose, score = wide_pose, wide_score
+        if self.options.degeneracy_threshold > 0:
+            info = translation_information(pts, pose.theta)
+            pose = fuse_with_prediction(pose, prior, info, self.options.degeneracy_threshold)
         return pose, score
 
     def _matching_submap(self) -> Submap | None:
