@@ -29,13 +29,12 @@ from types import ModuleType
 import numpy as np
 
 from bench.core import Benchmark, Figure
-from bench.datasets import ROS_MAPS
+from bench.datasets import MOVINGAI, ROS_MAPS
 from nav.planning.grid_search import FOUND, SearchState
 
 ROUNDS = 7
 WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
-DATASETS = Path("/work/shared/datasets")
-DEN312D = DATASETS / "movingai/mapf/den312d"
+DEN312D = MOVINGAI / "mapf/den312d"
 SCENARIOS = 20
 MOVINGAI_PASSABLE = frozenset(".GS")  # MovingAI map legend: '.', 'G', 'S' passable; '@', 'O', 'T', 'W' not
 
