@@ -235,8 +235,11 @@ class SearchState:
         h, w = passable.shape
         pw = w + 2
         n = (h + 2) * pw
+        if n >= 2**31:
+            raise ValueError(f"grid of {h} x {w} cells is too large for int32 cell ids")
         state = np.full((h + 2, pw), 3, dtype=np.uint8)
-        state[1:-1, 1:-1] = np.where(passable, 0, 3)
+        # uint8 all the way: np.where(passable, 0, 3) would build an int64 temporary (8 bytes a cell).
+        np.multiply(~passable, np.uint8(3), out=state[1:-1, 1:-1], dtype=np.uint8)
         padded_cost = np.zeros((h + 2, pw), dtype=np.uint8)
         padded_cost[1:-1, 1:-1] = cost
         s = (start[0] + 1) * pw + start[1] + 1
@@ -245,9 +248,10 @@ class SearchState:
         g = np.empty(n)
         hf = np.empty(n)
         hg = np.empty(n)
-        parent = np.empty(n, dtype=np.int64)
-        pos = np.empty(n, dtype=np.int64)
-        heap = np.empty(n, dtype=np.int64)
+        # int32 ids (grids up to 2^31 cells): half the memory traffic of int64 on large maps.
+        parent = np.empty(n, dtype=np.int32)
+        pos = np.empty(n, dtype=np.int32)
+        heap = np.empty(n, dtype=np.int32)
         state = state.ravel()
         state[s] = 1
         parent[s] = -1

@@ -1,0 +1,57 @@
+"""``navdeck bench peers`` helpers: MovingAI parsing, optional peers, the ratio table."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from bench.peers import (
+    Row,
+    load_movingai_map,
+    load_scenarios,
+    markdown_table,
+    navdeck_astar,
+    optional_import,
+    random_grid,
+)
+
+
+def test_movingai_map_and_scenarios(tmp_path: Path) -> None:
+    m = tmp_path / "tiny.map"
+    m.write_text("type octile\nheight 3\nwidth 4\nmap\n..@.\n.T..\nG..S\n")
+    grid = load_movingai_map(m)
+    assert grid.shape == (3, 4)
+    assert not grid[0, 2] and not grid[1, 1] and grid[2, 0] and grid[2, 3]
+    scen = tmp_path / "tiny.scen"
+    scen.write_text("version 1\n0\ttiny.map\t4\t3\t0\t0\t3\t2\t5.0\n")
+    ((start, goal, optimal),) = load_scenarios(scen, 20)
+    assert start == (0, 0) and goal == (2, 3)
+    # Every diagonal shortcut passes a blocked corner ('@' at (0,2), 'T' at (1,1)), so the only
+    # legal path runs down column 0 and along row 2: 5 straight steps.
+    assert navdeck_astar(grid, start, goal) == optimal == 5.0
+
+
+def test_missing_peer_is_none_and_row_has_no_ratio() -> None:
+    assert optional_import("no_such_peer_package_xyz") is None
+    row = Row("A*, x", 5.0, "pyastar2d (not installed)", None)
+    assert row.ratio is None
+    table = markdown_table([row, Row("A*, y", 3.0, "pyastar2d", 2.0)])
+    assert "| A*, y | 3 ms | pyastar2d 2 ms | 1.50 |" in table
+    assert "not installed" in table
+
+
+def test_random_grid_is_seeded_and_solvable() -> None:
+    a, b = random_grid(200, 0.2, 0), random_grid(200, 0.2, 0)
+    assert np.array_equal(a, b)
+    assert abs((~a).mean() - 0.2) < 0.01
+    assert np.isfinite(navdeck_astar(a, (0, 0), (199, 199)))
+
+
+def test_product_never_imports_a_peer() -> None:
+    root = Path(__file__).resolve().parents[1]
+    peers = ("pyastar2d", "karto_scanmatcher", "import amcl", "from amcl", "irsim")
+    for pkg in ("app", "robot", "nav", "maps"):
+        for f in (root / pkg).rglob("*.py"):
+            text = f.read_text()
+            assert not any(p in text for p in peers), f
