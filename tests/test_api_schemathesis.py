@@ -16,6 +16,7 @@ import schemathesis
 from conftest import make_settings
 from fastapi.testclient import TestClient
 from hypothesis import HealthCheck, given, settings
+from schema_checks import no_internal_error
 from schemathesis.checks import content_type_conformance, response_schema_conformance
 
 from app.main import create_app
@@ -31,12 +32,6 @@ def note_success(ctx, response, case) -> None:
     """Not a check: records which operations answered 2xx."""
     if 200 <= response.status_code < 300:
         answered[case.operation.label] += 1
-
-
-@schemathesis.check
-def no_internal_error(ctx, response, case) -> None:
-    if response.status_code >= 500 and response.status_code != 503:
-        raise AssertionError(f"{response.status_code} from {case.method} {case.formatted_path}")
 
 
 CHECKS = [note_success, no_internal_error, response_schema_conformance, content_type_conformance]

@@ -15,20 +15,12 @@ import pytest
 import schemathesis
 from conftest import make_settings
 from hypothesis import HealthCheck, given, settings
+from schema_checks import no_internal_error
 from schemathesis.checks import content_type_conformance, response_schema_conformance
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
 MAX_EXAMPLES = 8
-
-
-@schemathesis.check
-def no_internal_error(ctx, response, case) -> None:
-    """Any 5xx except 503: a 503 is a deliberate, documented answer ("the 3D view is not running")."""
-    if response.status_code >= 500 and response.status_code != 503:
-        raise AssertionError(
-            f"{response.status_code} from {case.method} {case.formatted_path}: {response.text[:300]}"
-        )
 
 
 # Deliberately slow: each failed sign-in doubles the answer's delay (app.auth.LoginThrottle), so a fuzzer

@@ -204,7 +204,7 @@ def test_api_goal_with_teb_is_reached_then_default_returns(virtual_client) -> No
         time.sleep(0.01)
     assert band is not None and band.ndim == 2 and band.shape[1] == 3 and len(band) >= 3
     state = _wait(c, lambda s: s["outcome"] is not None and not s["active"])
-    assert state["outcome"]["kind"] == "reached", state
+    assert state["outcome"]["kind"] == "succeeded", state
     assert state["controller"] == "teb"
     assert rt.session.collisions == 0
     assert rt.session.driver.truth_pose.distance_to(Pose2D(3.0, 2.3)) < 0.35
@@ -218,7 +218,7 @@ def test_api_goal_with_teb_is_reached_then_default_returns(virtual_client) -> No
     r = c.post("/api/navigation/goals", json={"x": 3.0, "y": 3.3, "theta": math.pi / 2})
     assert r.status_code == 200, r.text
     state = _wait(c, lambda s: s["outcome"] not in (None, first) and not s["active"])
-    assert state["controller"] == "dwa" and state["outcome"]["kind"] == "reached", state
+    assert state["controller"] == "dwa" and state["outcome"]["kind"] == "succeeded", state
 
 
 # ------------------------------------------------------------------------------------------- CLI
