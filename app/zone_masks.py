@@ -17,8 +17,9 @@ map_server thresholds 0.65 / 0.196 (it reads the same in trinary mode).
 Import groups equal mask values into 4-connected regions (``scipy.ndimage.label``) and turns each
 into a polygon along the cell boundaries (rectilinear outline, collinear vertices dropped). A region
 whose outline is not one simple polygon (a hole, or two corners meeting at a point), or that has
-more vertices than a zone may, is split into rectangles (runs per row merged down the rows), so
-every cell is kept and export -> import -> export is bit-exact.
+more vertices than a zone may, is cut in two along a row boundary through the hole (the touching
+corners, or halfway) and each piece is treated again, so every cell is kept (zones have no holes)
+and export -> import -> export is bit-exact.
 """
 
 from __future__ import annotations
@@ -243,16 +244,33 @@ def read_mask(yaml_bytes: bytes, image_bytes: bytes, image_name: str, geometry: 
 def region_polygons(region: np.ndarray) -> list[np.ndarray]:
     """Polygons in cell-corner coordinates (x = column, y = row) covering the True cells of one
     4-connected ``region`` exactly: its outline if it is one simple polygon within the vertex
-    limit, else rectangles."""
-    outline = _outline(region)
+    limit; else the region is cut in two along a row boundary through its first hole (or where two
+    corners touch, or halfway) and each connected piece is treated the same way."""
+    outline, cut = _outline(region)
     if outline is not None and len(outline) <= MAX_VERTICES:
         return [outline]
-    return _rectangles(region)
+    h = region.shape[0]
+    if h < 2:
+        return _rectangles(region)
+    if outline is None and cut is None:
+        holes, _ = ndimage.label(ndimage.binary_fill_holes(region) & ~region)
+        rows = np.nonzero(holes == 1)[0]
+        cut = (int(rows.min()) + int(rows.max()) + 1) // 2 if rows.size else None
+    if cut is None or not 0 < cut < h:
+        cut = h // 2
+    out: list[np.ndarray] = []
+    for part, r0 in ((region[:cut], 0), (region[cut:], cut)):
+        labels, _ = ndimage.label(part)
+        for k, box in enumerate(ndimage.find_objects(labels), 1):
+            offset = np.array([box[1].start, box[0].start + r0], dtype=float)
+            out.extend(p + offset for p in region_polygons(labels[box] == k))
+    return out
 
 
-def _outline(region: np.ndarray) -> np.ndarray | None:
-    """The counter-clockwise cell-boundary outline (collinear vertices dropped), or None when the
-    boundary is not a single simple loop (holes, corners touching at a point)."""
+def _outline(region: np.ndarray) -> tuple[np.ndarray | None, int | None]:
+    """The counter-clockwise cell-boundary outline (collinear vertices dropped), or (None, row of a
+    vertex where two corners touch) / (None, None for a hole) when the boundary is not a single
+    simple loop."""
     p = np.pad(region, 1)
     # vertical edges at x = c between cells (r, c-1) and (r, c); horizontal at y = r between rows
     left_in = p[1:-1, :-1] & ~p[1:-1, 1:]
@@ -277,8 +295,9 @@ def _outline(region: np.ndarray) -> np.ndarray | None:
     n = len(s)
     width = region.shape[1] + 2
     sk = s[:, 1] * width + s[:, 0]
-    if np.unique(sk).size != n:
-        return None  # a vertex where two corners of the region touch
+    keys, counts = np.unique(sk, return_counts=True)
+    if keys.size != n:  # a vertex where two corners of the region touch: cut along its row
+        return None, int(keys[np.argmax(counts > 1)] // width)
     nxt = dict(zip(sk.tolist(), (e[:, 1] * width + e[:, 0]).tolist(), strict=True))
     first = int(sk[0])
     loop, key = [first], nxt[first]
@@ -286,13 +305,13 @@ def _outline(region: np.ndarray) -> np.ndarray | None:
         loop.append(key)
         key = nxt[key]
     if len(loop) != n:
-        return None  # more than one loop: the region has a hole
+        return None, None  # more than one loop: the region has a hole
     pts = np.column_stack((np.array(loop) % width, np.array(loop) // width)).astype(float)
     prev, foll = np.roll(pts, 1, axis=0), np.roll(pts, -1, axis=0)
     cross = (pts[:, 0] - prev[:, 0]) * (foll[:, 1] - pts[:, 1]) - (pts[:, 1] - prev[:, 1]) * (
         foll[:, 0] - pts[:, 0]
     )
-    return pts[cross != 0]
+    return pts[cross != 0], None
 
 
 def _rectangles(region: np.ndarray) -> list[np.ndarray]:

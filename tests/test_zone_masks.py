@@ -138,9 +138,10 @@ def test_hole_and_pinch_regions_are_split_exactly() -> None:
     pinch[0:3, 0:3] = True
     pinch[3:6, 3:6] = True  # touches the first block at one corner only
     pinch[0:6, 5] = True  # ... and both are joined on the right: one 4-connected region
-    for region in (ring, pinch):
+    # the ring is cut once through its hole (two U shapes), the pinch along the touching corners' row
+    for region, pieces in ((ring, 2), (pinch, 3)):
         polys = region_polygons(region)
-        assert len(polys) > 1
+        assert len(polys) == pieces
         geom = GridGeometry(1.0, region.shape[1], region.shape[0], Pose2D(0.0, 0.0, 0.0))
         for p in polys:
             validate_polygon(p, geom)
@@ -311,3 +312,17 @@ def test_api_bad_masks_are_422_problems(client) -> None:
     assert client.get(f"/api/maps/{map_id}/zones").json()["total"] == before  # nothing stored
     assert client.get(f"/api/maps/{map_id}/zones/export", params={"kind": "nope"}).status_code == 422
     assert client.get("/api/maps/99999/zones/export", params={"kind": "keepout"}).status_code == 404
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_noisy_masks_with_holes_and_touching_corners_import_exactly(seed: int) -> None:
+    """Seeded random masks full of holes, diagonal contacts and single cells: every cell comes back."""
+    rng = np.random.default_rng(seed)
+    keep = np.where(rng.random((GEOM.height, GEOM.width)) < 0.45, 100, 0).astype(np.int8)
+    info = DEFAULT_INFO[FilterType.KEEPOUT]
+    zones = as_zones(zones_from_mask(keep, GEOM, info, "k"))
+    assert np.array_equal(mask_values(zones, GEOM, info), keep.astype(np.uint8))
+    speed = rng.choice(np.array([0, 20, 50, 70], dtype=np.int8), size=(GEOM.height, GEOM.width))
+    info = DEFAULT_INFO[FilterType.SPEED_PERCENT]
+    zones = as_zones(zones_from_mask(speed, GEOM, info, "s"))
+    assert np.array_equal(mask_values(zones, GEOM, info), speed.astype(np.uint8))
