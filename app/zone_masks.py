@@ -110,7 +110,8 @@ def mask_values(zones: list[Zone], geometry: GridGeometry, info: FilterInfo) -> 
 
 def speed_value(limit: float, info: FilterInfo, name: str = "") -> int:
     """The mask value 1..100 that encodes ``limit`` (nearest one: the mask has 100 levels)."""
-    v = round((limit - info.base) / info.multiplier) if info.multiplier else -1
+    q = (limit - info.base) / info.multiplier if info.multiplier else -1.0
+    v = round(q) if math.isfinite(q) else -1
     if not 1 <= v <= 100:
         raise MaskError(
             f"speed zone {name!r}: limit {limit:g} cannot be encoded with base {info.base:g} and "
@@ -381,7 +382,7 @@ def zones_from_mask(
 
 
 def _valid_limit(limit: float, ftype: FilterType) -> bool:
-    return limit > 0 and (ftype != FilterType.SPEED_PERCENT or limit <= 100)
+    return math.isfinite(limit) and limit > 0 and (ftype != FilterType.SPEED_PERCENT or limit <= 100)
 
 
 def _clean(x: float) -> float:

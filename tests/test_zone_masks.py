@@ -243,6 +243,10 @@ def test_mask_of_another_size_or_out_of_range_limits_are_refused() -> None:
     zones = as_zones([ZoneSpec("fast", ZoneKind.SPEED, square, 3.0, SpeedUnit.MPS)])
     with pytest.raises(MaskError, match="cannot be encoded"):  # 3 m/s > 100 x 0.01
         export_zip(zones, GEOM, DEFAULT_INFO[FilterType.SPEED_ABSOLUTE])
+    with pytest.raises(MaskError, match="cannot be encoded"):  # (3 - 0) / 1e-320 overflows
+        export_zip(zones, GEOM, FilterInfo(FilterType.SPEED_ABSOLUTE, 0.0, 1e-320))
+    with pytest.raises(MaskError, match="a limit must be > 0"):  # 1e308 + 1e308 * 50 is not a limit
+        zones_from_mask(values, GEOM, FilterInfo(FilterType.SPEED_ABSOLUTE, 1e308, 1e308), "x")
 
 
 # ------------------------------------------------------------------------------------------- API
