@@ -4,7 +4,13 @@ A mission is one navigation request (goals / waypoints, a controller): it gets a
 (``MissionState``), per-goal outcomes and, when cancelled, the reason and actor (``StopCause``). Every
 navigation request is a mission, whichever way it came (``POST /api/missions``, the goal endpoints,
 a click in the 3D view). Missions live in memory (the newest ``KEEP``) and every state change is a
-``mission`` event of the run. A mission runs on with no client connected (``LEASE_RULES``).
+``mission`` event of the run; every leg that ends (reached, failed, cancelled) is a ``mission_leg``
+event. A mission runs on with no client connected (``LEASE_RULES``).
+
+A patrol (``create(..., patrol=True)``) runs its legs in a loop until cancelled: it starts with two
+laps queued and, when the robot starts the last queued lap, appends another one to the running
+request (the navigation's extension, as a click in the 3D view adds a goal), so the robot never
+stops between laps and every leg keeps its own outcome.
 
 Waiting without polling: ``wait_change`` is an asyncio wait on the mission's version; the navigation
 stage's listener (loop thread) bumps it and wakes the waiters with ``call_soon_threadsafe``.
@@ -22,7 +28,7 @@ from datetime import UTC, datetime
 from enum import StrEnum
 from typing import TYPE_CHECKING, Any
 
-from app.features.navigation import Navigation, StopReason
+from app.features.navigation import GoalRejected, Navigation, NavigationRefused, StopReason
 from nav.types import Pose2D
 
 if TYPE_CHECKING:
@@ -75,6 +81,8 @@ class Mission:
     updated_at: datetime = field(default_factory=utc_now)
     version: int = 0
     waiters: list[tuple[asyncio.AbstractEventLoop, asyncio.Event]] = field(default_factory=list)
+    patrol: list[Pose2D] | None = None  # the lap of a patrol (repeated until cancelled)
+    patrol_queued: int = 0  # goal count once the last lap asked for is queued
 
     def __post_init__(self) -> None:
         self.goal_states = [GoalState.PENDING] * len(self.goals)
@@ -112,16 +120,30 @@ class Missions:
         controller: str | None = None,
         actor: str = "operator",
         allow_unknown: bool | None = None,
+        patrol: bool = False,
     ) -> Mission:
         """Start a mission (raises the navigation's GoalRejected / NavigationRefused). It supersedes
         the running one, whose cancel then says ``superseded`` with this ``actor``. ``allow_unknown``
-        accepts goals in unknown space (None: the navigation option ``allow_unknown_goals``)."""
+        accepts goals in unknown space (None: the navigation option ``allow_unknown_goals``).
+        ``patrol``: run ``goals`` as a lap, again and again until the mission is cancelled."""
+        if patrol and len(goals) < 2:
+            raise ValueError("a patrol needs at least two stops")
+        queued = list(goals) * 2 if patrol else list(goals)
         with self._lock:  # held across set_goals: the loop's "started" cannot overtake the registration
-            rid = self.nav.set_goals(goals, controller, actor=actor, allow_unknown=allow_unknown)
-            return self._register(rid, goals, controller, actor)
+            rid = self.nav.set_goals(queued, controller, actor=actor, allow_unknown=allow_unknown)
+            m = self._register(rid, queued, controller, actor, patrol=list(goals) if patrol else None)
+            return m
 
-    def _register(self, rid: int, goals: list[Pose2D], controller: str | None, actor: str) -> Mission:
-        m = Mission(uuid.uuid4().hex[:16], rid, list(goals), controller, actor)
+    def _register(
+        self,
+        rid: int,
+        goals: list[Pose2D],
+        controller: str | None,
+        actor: str,
+        patrol: list[Pose2D] | None = None,
+    ) -> Mission:
+        m = Mission(uuid.uuid4().hex[:16], rid, list(goals), controller, actor, patrol=patrol)
+        m.patrol_queued = len(goals)
         self._missions[m.id] = m
         self._by_request[rid] = m
         self._trim()
@@ -210,13 +232,41 @@ class Missions:
             else:
                 return
             self._changed(m)
+            self._next_lap(m)
+
+    def _next_lap(self, m: Mission) -> None:
+        """A patrol on its last queued lap gets one more (once: ``patrol_queued`` is the goal count
+        that lap will bring, so the progress ticks before the extension lands ask nothing)."""
+        lap = m.patrol
+        if not lap or m.state != MissionState.ACTIVE or m.patrol_queued > len(m.goals):
+            return
+        if m.reached < len(m.goals) - len(lap) or self.nav.current_request != m.request_id:
+            return
+        m.patrol_queued = len(m.goals) + len(lap)
+        try:
+            for goal in lap:
+                self.nav.add_goal(goal)
+        except (GoalRejected, NavigationRefused) as exc:  # a stop became unreachable (a new keepout)
+            log.warning("patrol %s: next lap refused: %s", m.id, exc)
+            self.session.add_event("mission", id=m.id, state=m.state.value, patrol_stopped=str(exc))
 
     def _mark(self, m: Mission, reached: int) -> None:
         for i in range(len(m.goals)):
             if i < reached:
-                m.goal_states[i] = GoalState.REACHED
+                self._leg(m, i, GoalState.REACHED)
             elif i == reached and m.state in (MissionState.ACTIVE, MissionState.CANCELING):
                 m.goal_states[i] = GoalState.ACTIVE
+
+    def _leg(self, m: Mission, i: int, state: GoalState, reason: str = "") -> None:
+        """Set leg ``i``'s outcome; the first time it ends, a ``mission_leg`` event of the run."""
+        if m.goal_states[i] in (GoalState.REACHED, GoalState.FAILED, GoalState.CANCELED):
+            return
+        m.goal_states[i], m.goal_reasons[i] = state, reason
+        g = m.goals[i]
+        lap = {"lap": i // len(m.patrol) + 1} if m.patrol else {}
+        self.session.add_event(
+            "mission_leg", id=m.id, index=i, **lap, state=state.value, reason=reason, pose=[g.x, g.y, g.theta]
+        )
 
     def _end(self, m: Mission, outcome: dict[str, Any], cause: dict[str, str] | None) -> None:
         kind = outcome["kind"]
@@ -230,12 +280,11 @@ class Missions:
         message = str(outcome.get("message") or "")
         for i in range(reached, len(m.goals)):
             if i == reached and kind == "failed":
-                m.goal_states[i], m.goal_reasons[i] = GoalState.FAILED, f"{reason}: {message}".strip(": ")
+                self._leg(m, i, GoalState.FAILED, f"{reason}: {message}".strip(": "))
             elif i == reached:
-                m.goal_states[i] = GoalState.CANCELED
-                m.goal_reasons[i] = (cause or {}).get("reason", reason)
+                self._leg(m, i, GoalState.CANCELED, (cause or {}).get("reason", reason))
             else:
-                m.goal_states[i], m.goal_reasons[i] = GoalState.CANCELED, "not_attempted"
+                self._leg(m, i, GoalState.CANCELED, "not_attempted")
         if kind == "failed":
             m.state = MissionState.FAILED
             m.failure = {"reason": reason, "message": message}

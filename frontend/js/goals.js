@@ -29,10 +29,39 @@ function renderQueue(t) {
   const key = JSON.stringify([goals, idx]);
   if (key === lastKey) return;
   lastKey = key;
+  refreshMission(); // a leg ended or the mission did: its outcomes changed
   $("#goal-list").replaceChildren(...goals.map((g, i) => {
     const li = document.createElement("li");
     li.textContent = pose(g);
     li.className = i < idx ? "done" : i === idx ? "current" : "";
+    return li;
+  }));
+}
+
+// The newest mission's legs, each with its outcome (reached / failed / cancelled and why), the last
+// LEGS_SHOWN of a long patrol (the list keeps their numbers). Fetched when the navigator's goal list
+// or progress changes.
+const LEGS_SHOWN = 30;
+let missionBusy = false;
+async function refreshMission() {
+  if (missionBusy) return;
+  missionBusy = true;
+  try {
+    renderLegs((await api("GET", "/api/missions?limit=1")).items[0]);
+  } catch { /* no navigation on this server: the panel stays empty */ } finally { missionBusy = false; }
+}
+
+function renderLegs(m) {
+  const head = $("#mission-head");
+  if (!m) { head.textContent = ""; $("#mission-legs").replaceChildren(); return; }
+  const p = m.progress;
+  head.textContent = `mission ${m.id.slice(0, 6)}: ${m.state}, ${p.goals_reached} of ${p.goal_count} legs reached`;
+  const first = Math.max(0, m.goals.length - LEGS_SHOWN);
+  $("#mission-legs").replaceChildren(...m.goals.slice(first).map((g, k) => {
+    const li = document.createElement("li");
+    li.value = first + k + 1;
+    li.className = `leg-${g.state}`;
+    li.textContent = `${pose(g.pose)}: ${g.state}${g.reason ? ` (${g.reason})` : ""}`;
     return li;
   }));
 }
@@ -72,15 +101,18 @@ export function init() {
   $("#goals-send").addEventListener("click", async () => {
     if (!draft.length) return;
     const repeat = Math.max(1, Math.round(Number($("#route-repeat").value) || 1));
+    const patrol = $("#route-patrol").checked;
     try {
-      if (repeat > 1 || draft.some((g) => g.place)) {
-        // a route: places by name and poses, run `repeat` times as one mission (a goal per leg)
+      if (repeat > 1 || patrol || draft.some((g) => g.place)) {
+        // a route: places by name and poses, run `repeat` times (or as a patrol until cancelled)
+        // as one mission (a goal per leg)
         const stops = draft.map((g) => (g.place ? g.place : { x: g.x, y: g.y, theta: g.theta }));
-        await api("POST", "/api/routes/run", { stops, repeat });
+        await api("POST", "/api/routes/run", patrol ? { stops, patrol } : { stops, repeat });
       } else {
         await api("POST", "/api/navigation/goals", draft.length === 1 ? draft[0] : draft);
       }
-      message(`navigating through ${draft.length} waypoint${draft.length > 1 ? "s" : ""}${repeat > 1 ? ` × ${repeat}` : ""}`, "ok");
+      const times = patrol ? " as a patrol" : repeat > 1 ? ` × ${repeat}` : "";
+      message(`navigating through ${draft.length} waypoint${draft.length > 1 ? "s" : ""}${times}`, "ok");
       draft.length = 0;
       renderDraft();
     } catch { /* the refusal (409/422 with its reason) is in Messages */ }
@@ -102,6 +134,7 @@ export function init() {
   });
   renderDraft();
   loadPlaces();
+  refreshMission();
 }
 
 // The active map's places (named poses, drawn on the Maps page's editor)

@@ -167,12 +167,14 @@ def start_mission(
     controller: str | None,
     actor: str,
     allow_unknown: bool | None = None,
+    patrol: bool = False,
 ) -> Mission:
-    """Create a mission; raises ProblemError (409 / 422) when it cannot start."""
+    """Create a mission (``patrol``: its goals in a loop until cancelled); raises ProblemError
+    (409 / 422) when it cannot start."""
     if not goals:
         raise ProblemError(422, "goals: give at least one goal", kind="invalid-request")
     try:
-        return missions.create(goals, controller, actor, allow_unknown)
+        return missions.create(goals, controller, actor, allow_unknown, patrol=patrol)
     except (GoalRejected, NavigationRefused) as exc:
         raise goal_problem(exc) from None
     except ValueError as exc:  # an unknown controller name

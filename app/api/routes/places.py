@@ -48,11 +48,17 @@ class PlacePage(Page[PlaceOut]):
 
 
 class RouteIn(StrictModel):
-    """Stops in order: place names (of the active map) or poses; the whole list ``repeat`` times."""
+    """Stops in order: place names (of the active map) or poses; the whole list ``repeat`` times, or
+    as a patrol loop until the mission is cancelled (``patrol: true`` or ``repeat: 0``)."""
 
     stops: list[str | PoseIn] = Field(min_length=1, max_length=200)
-    repeat: int = Field(1, ge=1, le=100, description="how many times to run the route")
+    repeat: int = Field(1, ge=0, le=100, description="how many times to run the route; 0: a patrol")
+    patrol: bool = Field(False, description="run the route in a loop until the mission is cancelled")
     controller: Literal["dwa", "teb"] | None = None
+
+    @property
+    def is_patrol(self) -> bool:
+        return self.patrol or self.repeat == 0
 
 
 def get_places(rt: RuntimeDep) -> PlaceStore:
@@ -144,9 +150,11 @@ def delete_place(place_id: DbId, places: PlacesDep) -> Response:
     "/api/routes/run",
     status_code=201,
     response_model=MissionOut,
-    summary="Run a route: places (by name) and poses in order, `repeat` times, as one mission",
+    summary="Run a route: places (by name) and poses in order, `repeat` times or as a patrol, as one mission",
     description="Each leg is a goal of the mission with its own state and reason "
-    "(`GET /api/missions/{id}`); cancel it like any mission.",
+    "(`GET /api/missions/{id}`) and a `mission_leg` event of the run; cancel it like any mission. "
+    "A patrol (`patrol: true` or `repeat: 0`, two stops or more) runs until cancelled: the next lap "
+    "is appended to the mission's goals when the robot starts the last one queued.",
     responses=ERRORS(
         s409="navigation cannot run now (not localized, e-stop, mode)",
         s422="an unknown place name, a stop off the map or in an obstacle",
@@ -156,9 +164,11 @@ def run_route(
     body: RouteIn, rt: RuntimeDep, missions: MissionsDep, actor: ActorDep, response: Response
 ) -> MissionOut:
     legs = [resolve_place(rt, s) if isinstance(s, str) else Pose2D(s.x, s.y, s.theta) for s in body.stops]
-    goals = legs * body.repeat
+    if body.is_patrol and len(legs) < 2:
+        raise ProblemError(422, "a patrol needs at least two stops", kind="invalid-request")
+    goals = legs if body.is_patrol else legs * body.repeat
     if len(goals) > MAX_ROUTE_GOALS:
         raise ProblemError(422, f"a route runs at most {MAX_ROUTE_GOALS} legs", kind="invalid-request")
-    m = start_mission(missions, goals, body.controller, actor)
+    m = start_mission(missions, goals, body.controller, actor, patrol=body.is_patrol)
     response.headers["Location"] = f"/api/missions/{m.id}"
     return mission_out(missions, m)
