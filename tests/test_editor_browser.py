@@ -1,6 +1,7 @@
 """The map editor on the Maps page in a real browser (Debian chromium): draw a line wall and a
 keepout zone on the active map, undo/redo, save a version, which is not activated; a self-crossing
-zone is refused in the page before any request (issue 19)."""
+zone is refused in the page before any request; the operator activates the version and a goal whose
+shortest route crossed the zone is reached around it (issue 19)."""
 
 from __future__ import annotations
 
@@ -89,6 +90,32 @@ def test_draw_wall_and_zone_save_a_version(browser, server: EmbeddedServer) -> N
         assert [z["name"] for z in api.get(f"/api/maps/{v2[0]['id']}/zones").json()["items"]] == ["wet floor"]
         pgm_old = api.get(f"/api/maps/{m['id']}/map.pgm").content
         assert api.get(f"/api/maps/{v2[0]['id']}/map.pgm").content != pgm_old  # the wall is in v2 only
+
+        # the operator activates v2 on the page; a goal whose straight route crosses the zone is reached
+        # around it (the robot has not moved: it is at the sim's start, 3.0, 3.5)
+        page.goto(server.url + "/maps.html")
+        page.get_by_role("button", name=f"make {v2[0]['name']} the active map").click()
+        deadline = time.monotonic() + 30
+        while api.get("/api/maps?limit=500").json()["active_map_id"] != v2[0]["id"]:
+            assert time.monotonic() < deadline, "v2 not activated"
+            time.sleep(0.1)
+        assert api.post("/api/control/acquire", json={"take_over": True}).status_code == 200
+        r = api.post("/api/localization/initial_pose", json={"x": 3.0, "y": 3.5, "theta": 0.0})
+        assert r.status_code == 200, r.text
+        r = api.post("/api/navigation/goals", json={"x": 1.2, "y": 3.5, "theta": 3.14})
+        assert r.status_code == 200, r.text
+        poses, state = [], {}
+        deadline = time.monotonic() + 180
+        while time.monotonic() < deadline:
+            state = api.get("/api/navigation").json()
+            poses.append(api.get("/api/robot").json()["pose"])
+            if state["outcome"] is not None and not state["active"]:
+                break
+            time.sleep(0.05)
+        assert state["outcome"] is not None and state["outcome"]["kind"] == "succeeded", state
+        inside = [p for p in poses if 2.0 <= p["x"] <= 2.4 and 2.9 <= p["y"] <= 4.9]
+        assert not inside, inside[:3]
+        assert any(2.0 <= p["x"] <= 2.4 for p in poses)  # it crossed the zone's x band, around the zone
     finally:
         ctx.close()
         api.close()
