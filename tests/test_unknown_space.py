@@ -170,6 +170,32 @@ def test_gap_narrower_than_robot_plus_margin_not_planned_through(free_cells: int
         st.session.close()
 
 
+def test_a_start_pressed_against_a_wall_is_planned_out_downhill_but_not_through_a_narrow_gap() -> None:
+    """skid4 pressed side-on against the wall, its centre 0.09 m from the face (localization jitter, a
+    mark a cell too close: the office's tightest spot had the like): its cell and all its neighbours
+    cost more than the gap rule's max_cost, and the search expanded the start only (NoValidPathFound
+    "after 1 expansions", as in the office). The path leaves through those cells with the
+    cost falling at every step; pressed against the mouth of a 0.25 m gap, the gap stays closed."""
+    grid = _wall_with_gap(5)
+    start = Pose2D(1.91, 0.8, math.pi / 2)
+    st = _stack(grid, grid, start)
+    try:
+        cm = st.navigation.global_costmap
+        assert cm is not None
+        planner = st.navigation.planner
+        limit = planner.options.max_cost
+        assert int(cm.cost_at(np.array([[start.x, start.y]]))[0]) > limit
+        path = planner.plan(cm, start, Pose2D(1.0, 0.8, 0.0))
+        costs = cm.cost_at(path.poses[:, :2]).astype(int)
+        high = np.flatnonzero(costs > limit)
+        assert high.size and np.array_equal(high, np.arange(high.size))  # only the first cells
+        assert np.all(np.diff(costs[: high.size + 1]) < 0)  # each one lower than the one before
+        with pytest.raises(NoValidPathFound):  # pressed at the mouth of the narrow gap
+            planner.plan(cm, Pose2D(1.91, 1.5, math.pi / 2), Pose2D(3.0, 1.5, 0.0))
+    finally:
+        st.session.close()
+
+
 class StandStill:
     """A controller that commands standing still while following (what the issue saw for 85 s)."""
 

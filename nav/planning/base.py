@@ -23,6 +23,7 @@ from nav.planning.errors import (
     StartOccupied,
     StartOutsideMap,
 )
+from nav.planning.escape import descent_from_start
 from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SearchState
 from nav.planning.smoothing import SmootherOptions, orientations, path_is_traversable, smooth_cells
 from nav.types import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION, Costmap, Path, Pose2D
@@ -154,6 +155,8 @@ class GridPlanner:
         if costs[sr, sc] == LETHAL_OBSTACLE:
             raise StartOccupied(f"start ({start.x:.2f}, {start.y:.2f}) is in a lethal obstacle")
         passable = traversable_mask(costs, opts.allow_unknown, opts.max_cost)
+        # a start nearer an obstacle than max_cost allows (a robot pressed against it) leaves downhill
+        passable |= descent_from_start(costs, (sr, sc), opts.max_cost)
         if opts.allow_unknown and opts.unknown_cost != NO_INFORMATION:
             costs = np.where(costs == NO_INFORMATION, np.uint8(opts.unknown_cost), costs)
         tol_cells = max(opts.tolerance, 0.0) / geo.resolution
