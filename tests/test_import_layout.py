@@ -29,9 +29,11 @@ TOP_IMPORTS_ONLY = [
     "bench/peers.py",
     "tests/test_app_session.py",
     "tests/test_map_edit.py",
+    "tests/test_patrol.py",
     "tests/test_places_api.py",
     "tests/test_unknown_space.py",
     "tests/test_zones_api.py",
+    "tests/test_zone_masks.py",
     "tests/test_zones_nav.py",
 ]
 
