@@ -2,6 +2,8 @@
 
 Each module there defines ``register(subparsers)`` which adds its parser and sets ``func``.
 A command reports a user error by raising ``CliError``: the CLI prints one line and exits 2.
+Every command module is imported to build the parser, so a command imports its heavy modules inside
+its ``run`` function: ``navdeck --help`` loads neither the server nor the navigation stack.
 """
 
 from __future__ import annotations

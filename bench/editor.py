@@ -20,14 +20,22 @@ from pathlib import Path
 
 import numpy as np
 
+from app.features import localization, navigation, zones
+from app.runtime import Runtime
+from app.settings import Settings
+from app.zone_store import SpeedUnit, ZoneKind, ZoneSpec
 from bench.core import Benchmark, Figure
+from nav.costmap import Costmap2D
+from nav.costmap.filter_layer import points_in_polygon, rasterize_polygons
+from nav.map_edit import Stroke, apply_edits
+from nav.planning import make_planner
+from nav.types import GridGeometry, OccupancyGrid, Pose2D
+from robot.clock import VirtualClock
 
 BIG = 2000
 
 
 def _big_map():
-    from nav.types import GridGeometry, OccupancyGrid, Pose2D
-
     rng = np.random.default_rng(19)
     data = np.zeros((BIG, BIG), np.int8)
     data[rng.random((BIG, BIG)) < 0.002] = 100  # clutter
@@ -39,9 +47,6 @@ def _big_map():
 
 
 def zone_on_big_map() -> list[Figure]:
-    from nav.costmap import Costmap2D
-    from nav.costmap.filter_layer import rasterize_polygons
-
     grid = _big_map()
     cm = Costmap2D.from_map(grid)
     cm.costmap()
@@ -71,9 +76,6 @@ def zone_on_big_map() -> list[Figure]:
 
 
 def edit_on_big_map() -> list[Figure]:
-    from nav.costmap import Costmap2D
-    from nav.map_edit import Stroke, apply_edits
-
     grid = _big_map()
     cm = Costmap2D.from_map(grid)
     cm.costmap()
@@ -105,11 +107,6 @@ def edit_on_big_map() -> list[Figure]:
 
 
 def _runtime(world: str, tmp: Path):
-    from app.features import localization, navigation, zones
-    from app.runtime import Runtime
-    from app.settings import Settings
-    from robot.clock import VirtualClock
-
     settings = Settings(data_dir=tmp, db_url=f"sqlite:///{tmp / 'navdeck.db'}", viewer=False, world=world)
     rt = Runtime.build(settings, clock=VirtualClock())
     for mod in (localization, navigation, zones):
@@ -119,8 +116,6 @@ def _runtime(world: str, tmp: Path):
 
 
 def _drive(rt, goal, seconds: float, on_tick=None) -> str:
-    from nav.types import Pose2D
-
     nav = rt.features["navigation"]
     rt.on_pose_input("goal", Pose2D(*goal))
     for _ in range(round(seconds / rt.session.period)):
@@ -149,11 +144,6 @@ def _barrier(path: np.ndarray) -> np.ndarray:
 
 
 def keepout_goals(per_world: int = 5) -> list[Figure]:
-    from app.zone_store import ZoneKind, ZoneSpec
-    from nav.costmap.filter_layer import points_in_polygon, rasterize_polygons
-    from nav.planning import make_planner
-    from nav.types import Pose2D
-
     figs = []
     for world in ("apartment", "office", "greenhouse"):
         with tempfile.TemporaryDirectory() as tmp:
@@ -216,9 +206,6 @@ def keepout_goals(per_world: int = 5) -> list[Figure]:
 
 
 def speed_zone() -> list[Figure]:
-    from app.zone_store import SpeedUnit, ZoneKind, ZoneSpec
-    from nav.costmap.filter_layer import points_in_polygon
-
     with tempfile.TemporaryDirectory() as tmp:
         rt = _runtime("apartment", Path(tmp))
         try:

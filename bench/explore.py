@@ -35,9 +35,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import ndimage
 
+from app.commands.explore import ExploreConfig, build_explore_stack, load_world, random_start, run_explore
 from bench.core import Benchmark, Figure
 from bench.ghost import FREE_MAX, _world_free_and_exterior
-from nav.types import OccupancyGrid, Pose2D
+from nav.exploration import FrontierExplorer, distance_field
+from nav.types import INSCRIBED_INFLATED_OBSTACLE, Costmap, OccupancyGrid, Pose2D
+from robot.profiles import load_profile
 
 OCCUPIED_MIN = 65
 
@@ -109,10 +112,6 @@ def tour_lower_bound_s(
     clear of walls) every ``stride`` m; sight: the simulator's ray caster, ``beams`` rays up to the
     lidar's range. Places are taken in order of travel distance from the start (one Dijkstra field);
     the distance at which the last visible free cell is first seen is the bound."""
-    from nav.exploration import distance_field
-    from nav.types import Costmap
-    from robot.profiles import load_profile
-
     prof = load_profile(profile)
     wg = world.geometry
     res = wg.resolution
@@ -154,8 +153,6 @@ FAMILY_SEEDS = {"apartment": range(0, 4), "office": range(0, 2)}
 
 
 def run_one(world_spec: str, seed: int, timeout: float = 1800.0) -> dict[str, float]:
-    from app.commands.explore import ExploreConfig, load_world, random_start, run_explore
-
     world = load_world(world_spec)
     start = random_start(world, "skid4", seed)
     res = run_explore(
@@ -239,8 +236,6 @@ def _unexplored_goals(world, start: Pose2D, n: int, seed: int, clearance: float)
 
 def _known(nav, target: Pose2D) -> bool:
     """Whether the live costmap has ``target`` as a traversable known cell (a goal it accepts)."""
-    from nav.types import INSCRIBED_INFLATED_OBSTACLE
-
     cm = nav.global_costmap
     rows, cols = cm.geometry.world_to_cell(np.array([[target.x, target.y]]))
     return bool(
@@ -272,11 +267,6 @@ def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float =
     """Office, mapping from the corridor: goals drawn in its free space, reached by clicking towards
     each on the growing map (``_toward``) until it is known, then on it. Reached: the robot's true
     position within 0.35 m of the goal (the goal checker's 0.25 m plus the SLAM map's drift)."""
-    from app.commands.explore import build_explore_stack, load_world
-    from nav.exploration import FrontierExplorer, distance_field
-    from nav.types import Costmap
-    from robot.profiles import load_profile
-
     world = load_world("office")
     radius = load_profile("skid4").circumscribed_radius
     passable = np.where(world.clearance_map >= radius, 0, 254).astype(np.uint8)

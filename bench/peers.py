@@ -30,6 +30,7 @@ import numpy as np
 
 from bench.core import Benchmark, Figure
 from bench.datasets import MOVINGAI, ROS_MAPS
+from bench.planning import _component_corners, _real_map_costmap
 from nav.planning.grid_search import FOUND, SearchState
 
 ROUNDS = 7
@@ -60,6 +61,12 @@ def optional_import(name: str) -> ModuleType | None:
         return importlib.import_module(name)
     except Exception:  # a broken peer install must not stop the other rows
         return None
+
+
+# The peers, imported once at module level; a missing or broken one is None and only its row is
+# skipped (see optional_import).
+PYASTAR2D = optional_import("pyastar2d")
+REPORTED_PEERS = {name: optional_import(name) for name in ("karto_scanmatcher", "amcl", "irsim")}
 
 
 def alternating_medians(
@@ -108,8 +115,6 @@ def load_scenarios(path: Path, count: int) -> list[tuple[tuple[int, int], tuple[
 
 
 def willow_grid() -> tuple[np.ndarray, tuple[int, int], tuple[int, int]]:
-    from bench.planning import _component_corners, _real_map_costmap
-
     cm = _real_map_costmap(WILLOW, 0.2)
     s, g = _component_corners(cm)
     rs, cs = cm.geometry.world_to_cell(np.array([[s.x, s.y], [g.x, g.y]]))
@@ -194,9 +199,9 @@ def markdown_table(rows: list[Row]) -> str:
 
 
 def bench_peers() -> list[Figure]:
-    rows = _astar_rows(optional_import("pyastar2d"))
-    for name in ("karto_scanmatcher", "amcl", "irsim"):
-        if optional_import(name) is None:
+    rows = _astar_rows(PYASTAR2D)
+    for name, module in REPORTED_PEERS.items():
+        if module is None:
             print(f"peer {name}: not installed")
     print(markdown_table(rows))
     figs: list[Figure] = []

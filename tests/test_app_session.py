@@ -2,13 +2,18 @@
 
 from __future__ import annotations
 
+import os
+import threading
+import time
+
 import numpy as np
 import pytest
 
+from app.limits import CommandRefused
 from app.modes import Mode
-from app.session import Session
+from app.session import Session, SessionOptions, _prioritize_this_thread
 from nav.types import Twist2D
-from robot.clock import VirtualClock
+from robot.clock import RealClock, VirtualClock
 from robot.profiles import load_profile
 from robot.sim import SimDriver, World
 
@@ -93,13 +98,6 @@ def test_lidar_silence_faults_and_stops() -> None:
 def test_real_time_loop_thread_asks_for_priority_and_workers_do_not_keep_it() -> None:
     """On a real clock the loop thread asks for ``loop_nice`` (granted to root / CAP_SYS_NICE) and
     the worker threads it starts go back to the process's nice value."""
-    import os
-    import threading
-    import time
-
-    from app.session import SessionOptions, _prioritize_this_thread
-    from robot.clock import RealClock
-
     clock = RealClock()
     w = World.stock("apartment")
     driver = SimDriver(w, load_profile("skid4"), clock, seed=1, start_pose=w.start_pose)
@@ -143,8 +141,6 @@ def test_real_time_loop_thread_asks_for_priority_and_workers_do_not_keep_it() ->
     ],
 )
 def test_command_beyond_sanity_bound_is_refused_and_stops(cmd: Twist2D, component: str) -> None:
-    from app.limits import CommandRefused
-
     s = make_session()
     s.request_mode("teleop")
     drive(s, Twist2D(0.2, 0.0, 0.0), 1.0)

@@ -10,7 +10,10 @@ from collections.abc import Iterator
 import numpy as np
 import pytest
 from conftest import make_settings
+from fastapi.testclient import TestClient
 
+from app.main import create_app
+from app.runtime import Runtime
 from nav.costmap import Costmap2D
 from nav.costmap.filter_layer import rasterize_polygons
 from nav.map_edit import Fill, Stroke, apply_edits
@@ -54,11 +57,6 @@ def test_costmap_update_only_in_the_edited_region_equals_a_rebuild() -> None:
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator:
-    from fastapi.testclient import TestClient
-
-    from app.main import create_app
-    from app.runtime import Runtime
-
     runtime = Runtime.build(make_settings(tmp_path_factory.mktemp("mapedit")))
     with TestClient(create_app(runtime)) as c:
         yield c

@@ -7,10 +7,16 @@ from pathlib import Path
 
 import pytest
 from conftest import make_settings
+from fastapi.testclient import TestClient
 
+from app.api.routes.places import RouteIn
+from app.features import localization, missions, navigation, zones
 from app.features.missions import GoalState, MissionState
+from app.main import create_app
 from app.modes import Mode
+from app.runtime import Runtime
 from nav.types import Pose2D
+from robot.clock import VirtualClock
 
 # two free spots in the apartment world's living room, around its start (3.0, 3.5)
 SOFA = Pose2D(1.5, 3.5, 3.14)
@@ -18,10 +24,6 @@ WINDOW = Pose2D(2.2, 1.8, -1.57)
 
 
 def test_a_patrol_loops_until_cancelled(tmp_path: Path) -> None:
-    from app.features import localization, missions, navigation, zones
-    from app.runtime import Runtime
-    from robot.clock import VirtualClock
-
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
         for mod in (localization, navigation, missions, zones):
@@ -57,11 +59,6 @@ def test_a_patrol_loops_until_cancelled(tmp_path: Path) -> None:
 
 
 def test_route_api_patrol_and_repeat_zero(tmp_path: Path) -> None:
-    from fastapi.testclient import TestClient
-
-    from app.main import create_app
-    from app.runtime import Runtime
-
     with TestClient(create_app(Runtime.build(make_settings(tmp_path)))) as client:
         assert client.post("/api/localization/initial_pose", json={"x": 3.0, "y": 3.5}).status_code == 200
         stops = [{"x": 1.5, "y": 3.5}, {"x": 2.2, "y": 1.8}]
@@ -76,7 +73,5 @@ def test_route_api_patrol_and_repeat_zero(tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("repeat", [-1, 101])
 def test_route_repeat_out_of_range_is_422(tmp_path: Path, repeat: int) -> None:
-    from app.api.routes.places import RouteIn
-
     with pytest.raises(ValueError, match="repeat"):
         RouteIn.model_validate({"stops": ["dock"], "repeat": repeat})

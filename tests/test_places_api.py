@@ -8,10 +8,17 @@ from pathlib import Path
 
 import pytest
 from conftest import make_settings
+from fastapi.testclient import TestClient
 
+from app.api.routes.places import resolve_place
+from app.features import localization, missions, navigation, zones
 from app.features.missions import GoalState, MissionState
+from app.main import create_app
 from app.modes import Mode
+from app.place_store import PlaceStore
+from app.runtime import Runtime
 from nav.types import Pose2D
+from robot.clock import VirtualClock
 
 # three free spots in the apartment world's living room, around its start (3.0, 3.5)
 PLACES = {"sofa": (1.5, 3.5, 3.14), "window": (2.2, 1.8, -1.57), "door": (3.0, 4.3, 1.57)}
@@ -19,11 +26,6 @@ PLACES = {"sofa": (1.5, 3.5, 3.14), "window": (2.2, 1.8, -1.57), "door": (3.0, 4
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator:
-    from fastapi.testclient import TestClient
-
-    from app.main import create_app
-    from app.runtime import Runtime
-
     runtime = Runtime.build(make_settings(tmp_path_factory.mktemp("placesapi")))
     with TestClient(create_app(runtime)) as c:
         yield c
@@ -70,12 +72,6 @@ def test_places_crud_and_goals_by_name(client) -> None:
 
 def test_a_route_of_three_places_run_twice(tmp_path: Path) -> None:
     """Virtual clock: each of the six legs is reached, in order, and recorded as its own outcome."""
-    from app.api.routes.places import resolve_place
-    from app.features import localization, missions, navigation, zones
-    from app.place_store import PlaceStore
-    from app.runtime import Runtime
-    from robot.clock import VirtualClock
-
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
         for mod in (localization, navigation, missions, zones):

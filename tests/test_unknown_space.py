@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from app.cli import main
 from app.commands.sim_nav import SimStack, build_sim_stack, unknown_grid
 from app.features.navigation import GoalRejected
 from bench.scenarios.forest import PROFILE, forest_trial
@@ -268,8 +269,6 @@ APARTMENT = Path(__file__).resolve().parent.parent / "maps" / "stock" / "apartme
 
 
 def _cli(capsys: pytest.CaptureFixture, *args: str) -> tuple[int, str, str]:
-    from app.cli import main
-
     try:
         code = main(list(args))
     except SystemExit as exc:  # argparse errors

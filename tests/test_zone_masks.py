@@ -13,7 +13,10 @@ from datetime import UTC, datetime
 import numpy as np
 import pytest
 from conftest import make_settings
+from fastapi.testclient import TestClient
 
+from app.main import create_app
+from app.runtime import Runtime
 from app.zone_masks import (
     DEFAULT_INFO,
     FilterInfo,
@@ -254,11 +257,6 @@ def test_mask_of_another_size_or_out_of_range_limits_are_refused() -> None:
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator:
-    from fastapi.testclient import TestClient
-
-    from app.main import create_app
-    from app.runtime import Runtime
-
     runtime = Runtime.build(make_settings(tmp_path_factory.mktemp("zonemasks")))
     with TestClient(create_app(runtime)) as c:
         yield c

@@ -7,17 +7,16 @@ from collections.abc import Iterator
 
 import pytest
 from conftest import make_settings
+from fastapi.testclient import TestClient
+
+from app.main import create_app
+from app.runtime import Runtime
 
 SQUARE = [[2.0, 1.0], [4.0, 1.0], [4.0, 2.0], [2.0, 2.0]]
 
 
 @pytest.fixture(scope="module")
 def client(tmp_path_factory: pytest.TempPathFactory) -> Iterator:
-    from fastapi.testclient import TestClient
-
-    from app.main import create_app
-    from app.runtime import Runtime
-
     runtime = Runtime.build(make_settings(tmp_path_factory.mktemp("zonesapi")))
     with TestClient(create_app(runtime)) as c:
         yield c

@@ -10,10 +10,15 @@ from pathlib import Path
 import numpy as np
 from conftest import make_settings
 
+from app.api.ws_schema import ZonesMsg
+from app.features import localization, navigation, zones
 from app.modes import Mode
+from app.runtime import Runtime
+from app.telemetry import snapshot_dict
 from app.zone_store import SpeedUnit, ZoneKind, ZoneSpec
 from nav.costmap.filter_layer import points_in_polygon
 from nav.types import Pose2D, Twist2D
+from robot.clock import VirtualClock
 
 GOAL = Pose2D(0.8, 3.5, math.pi)
 # across the straight line start -> goal, from the north wall down to y = 2.9: the way is below it
@@ -21,10 +26,6 @@ KEEPOUT = [[2.0, 2.9], [2.4, 2.9], [2.4, 4.95], [2.0, 4.95]]
 
 
 def runtime(tmp_path: Path):
-    from app.features import localization, navigation, zones
-    from app.runtime import Runtime
-    from robot.clock import VirtualClock
-
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     for mod in (localization, navigation, zones):  # what Runtime.start does, without the wall-clock thread
         rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
@@ -92,9 +93,6 @@ def test_a_speed_zone_limits_teleop_and_says_why(tmp_path: Path) -> None:
 
 
 def test_telemetry_names_the_speed_limit_and_its_zone(tmp_path: Path) -> None:
-    from app.api.ws_schema import ZonesMsg
-    from app.telemetry import snapshot_dict
-
     rt = runtime(tmp_path)
     try:
         square = [[2.5, 3.0], [3.5, 3.0], [3.5, 4.0], [2.5, 4.0]]

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from app.modes import Mode
+from app.modes import Mode, TransitionRefused
 from nav.exploration import FrontierExplorer, FrontierOptions, FrontierReport, goal_pose
 from nav.types import Pose2D
 
@@ -122,8 +122,6 @@ class Exploration:
     def start(self, time_budget: float | None = None) -> None:
         """Start exploring (mapping starts too unless it runs). ``time_budget`` in seconds of the
         session clock; None: until no frontier is left. Raises ``ExplorationRefused``."""
-        from app.modes import TransitionRefused
-
         if time_budget is not None and not (math.isfinite(time_budget) and time_budget > 0):
             raise ValueError(f"time budget must be a positive number of seconds, got {time_budget}")
         modes = self.session.modes

@@ -37,10 +37,17 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 import numpy as np
 
 from app.modes import Mode, TransitionRefused
+from nav.behaviors import BehaviorContext, Status
+from nav.behaviors.base import BehaviorLimits
+from nav.control import GoalChecker, ProgressChecker
 from nav.control.teb import TebController
+from nav.costmap import Costmap2D, CostmapOptions, InflationOptions, inflation_cost, local_costmap_options
 from nav.localization.divergence import DivergenceMonitor, DivergenceOptions
-from nav.navigator import TERMINAL
+from nav.navigator import TERMINAL, Navigator, NavigatorOptions, check_controller_name
+from nav.planning import PlannerOptions, make_planner, nearest_free_pose
 from nav.planning.errors import PlannerError
+from nav.recovery import RecoveryPolicy as Nav2RecoveryPolicy
+from nav.recovery import Trigger
 from nav.types import (
     INSCRIBED_INFLATED_OBSTACLE,
     LETHAL_OBSTACLE,
@@ -171,10 +178,8 @@ class BehaviorRecovery:
     result becomes a ``recovery`` event."""
 
     def __init__(self, options: Any = None) -> None:
-        from nav.recovery import RecoveryPolicy
-
         self._feature: Navigation | None = None
-        self.policy = RecoveryPolicy(options, on_event=self._event)
+        self.policy = Nav2RecoveryPolicy(options, on_event=self._event)
 
     def _event(self, ev: Any) -> None:
         if self._feature is not None:
@@ -183,9 +188,6 @@ class BehaviorRecovery:
                 self._feature.mark_recovery(ev.behavior)
 
     def _ctx(self, feature: Navigation, now: float) -> Any:
-        from nav.behaviors import BehaviorContext
-        from nav.behaviors.base import BehaviorLimits
-
         s = feature.session
         return BehaviorContext(
             now=now,
@@ -207,15 +209,11 @@ class BehaviorRecovery:
         self.policy.reset()
 
     def start(self, feature: Navigation, reason: str, now: float) -> bool:
-        from nav.recovery import Trigger
-
         self._feature = feature
         trigger = Trigger(_TRIGGERS.get(reason, "planner_failure"))
         return self.policy.on_failure(trigger, self._ctx(feature, now), reason) is not None
 
     def tick(self, feature: Navigation, now: float) -> tuple[Twist2D | None, bool]:
-        from nav.behaviors import Status
-
         if self.policy.active is None:  # finished (or failed) right at start
             return ZERO_TWIST, True
         status = self.policy.tick(self._ctx(feature, now))
@@ -303,10 +301,6 @@ class Navigation:
         localization: Localization,
         options: NavigationOptions | None = None,
     ) -> None:
-        from nav.control import GoalChecker, ProgressChecker
-        from nav.navigator import Navigator, NavigatorOptions
-        from nav.planning import make_planner
-
         self.session = session
         self.localization = localization
         self.options = o = options or NavigationOptions()
@@ -404,9 +398,6 @@ class Navigation:
         return {"unknown_is_lethal": o.local_track_unknown_space, **given}
 
     def _planner_options(self):
-        from nav.costmap import InflationOptions, inflation_cost
-        from nav.planning import PlannerOptions
-
         o = self.options
         infl = InflationOptions(o.inflation_radius, o.cost_scaling_factor)
         inscribed = self.profile.inscribed_radius
@@ -421,8 +412,6 @@ class Navigation:
         return PlannerOptions(allow_unknown=o.allow_unknown, unknown_cost=o.unknown_cost, max_cost=limit)
 
     def _costmap_options(self, rolling: bool):
-        from nav.costmap import CostmapOptions, InflationOptions, local_costmap_options
-
         fp = tuple(self.profile.footprint)
         radius = self.profile.robot_radius if self.profile.robot_radius > 0 else 0.1
         infl = InflationOptions(
@@ -448,8 +437,6 @@ class Navigation:
         )
 
     def _build_costmaps(self, grid: OccupancyGrid | None) -> None:
-        from nav.costmap import Costmap2D
-
         if grid is None:
             self._global = self._local = None
             self._global_cm = self._local_cm = None
@@ -533,8 +520,6 @@ class Navigation:
         """Raise ``GoalRejected`` for a goal off the map, in an obstacle, inside the inscribed radius
         of one, or in unknown space (unless ``allow_unknown``, default the option
         ``allow_unknown_goals``); the error carries the nearest traversable pose."""
-        from nav.planning import nearest_free_pose
-
         cm = self._global_cm
         if cm is None:
             raise NavigationRefused("no active map: choose a map first", self.session.modes.mode.value)
@@ -603,8 +588,6 @@ class Navigation:
         extends: int | None,
         allow_unknown: bool | None = None,
     ) -> int:
-        from nav.navigator import check_controller_name
-
         if not goals:
             raise GoalRejected("missing", Pose2D(), None)
         if controller is not None:
