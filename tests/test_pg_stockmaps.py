@@ -6,16 +6,18 @@ from __future__ import annotations
 
 import subprocess
 import sys
+import zlib
 from pathlib import Path
 
 import numpy as np
+import sqlalchemy as sa
 from conftest import ROOT
 from sqlalchemy import text
 from sqlmodel import Session
 
 from app.db import make_engine, migrate
-from app.map_store import MapStore
-from app.models import Run
+from app.map_store import MapStore, thumbnail_png
+from app.models import MapRecord, Run
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 
 # Each process migrates, then registers two stock worlds. Its loader waits at a file barrier until every
@@ -87,6 +89,31 @@ def test_fleet_start_registers_each_stock_map_once(pg_url: str, tmp_path: Path) 
         engine.dispose()
 
 
+def insert_map_at_0003(
+    engine: sa.Engine, name: str, grid: OccupancyGrid, *, source: str = "import", is_stock: bool = False
+) -> int:
+    """A map row written with the columns the schema had at 0003 (today's model has later columns,
+    such as 0007's parent_id and version, that the old table lacks)."""
+    g = grid.geometry
+    rec = MapRecord(
+        name=name,
+        resolution=g.resolution,
+        origin_x=g.origin.x,
+        origin_y=g.origin.y,
+        origin_yaw=g.origin.theta,
+        width=g.width,
+        height=g.height,
+        data=zlib.compress(np.ascontiguousarray(grid.data, dtype=np.int8).tobytes(), 6),
+        thumbnail_png=thumbnail_png(grid),
+        source=source,
+        is_stock=is_stock,
+    )
+    maps = sa.Table("maps", sa.MetaData(), autoload_with=engine)
+    values = {c.name: getattr(rec, c.name) for c in maps.columns if c.name != "id"}
+    with engine.begin() as conn:
+        return int(conn.execute(maps.insert().values(**values)).inserted_primary_key[0])
+
+
 def test_migration_0004_merges_existing_duplicates(db_url: str) -> None:
     """A database where the race already happened: duplicates are merged and runs repointed."""
     engine = make_engine(db_url)
@@ -94,18 +121,18 @@ def test_migration_0004_merges_existing_duplicates(db_url: str) -> None:
         migrate(engine, "0003")
         store = MapStore(engine)
         grid = OccupancyGrid(GridGeometry(0.05, 4, 4, Pose2D()), np.zeros((4, 4), np.int8))
-        first = store.add("office", grid, source="stock", is_stock=True)
-        dup = store.add("office", grid, source="stock", is_stock=True)
-        mine = store.add("office", grid)  # an import with the same name is not a duplicate
+        first = insert_map_at_0003(engine, "office", grid, source="stock", is_stock=True)
+        dup = insert_map_at_0003(engine, "office", grid, source="stock", is_stock=True)
+        mine = insert_map_at_0003(engine, "office", grid)  # an import with the same name is not a duplicate
         with Session(engine) as s:
-            run = Run(kind="teleop", map_id=dup.id)
+            run = Run(kind="teleop", map_id=dup)
             s.add(run)
             s.commit()
             run_id = run.id
         migrate(engine)
         ids = sorted(m.id for m in store.list() if m.name == "office")
-        assert ids == sorted([first.id, mine.id])
+        assert ids == sorted([first, mine])
         with Session(engine) as s:
-            assert s.get(Run, run_id).map_id == first.id
+            assert s.get(Run, run_id).map_id == first
     finally:
         engine.dispose()
