@@ -689,7 +689,7 @@ class Navigation:
 
     def _guard(self) -> str | None:
         if not self.localization.localized:
-            return "not localized: set the initial pose or run global localization"
+            return self.localization.not_localized_reason
         if self._global_cm is None:
             return "no active map"
         return None
