@@ -11,6 +11,7 @@ tolerances, and the error rates of thresholds.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import math
 
@@ -21,6 +22,7 @@ from nav.localization import sensor_models as sm
 from nav.types import Pose2D, wrap_angle
 from robot.profiles import load_profile
 from robot.sim.lidar import SimLidar
+from robot.sim.people import PeopleError
 from robot.sim.world import World
 from robot.sim.worldgen import FAMILIES, generate
 
@@ -61,10 +63,8 @@ def measure(seeds: int, poses: int, people: int, seed: int = 0) -> list[dict]:
             truth = Pose2D(float(xy[0]), float(xy[1]), float(rng.uniform(-math.pi, math.pi)))
             world.people.clear()
             if people:
-                try:
+                with contextlib.suppress(PeopleError):  # a world without room for them: none
                     world.people.populate(people, rng, avoid=(truth.x, truth.y), min_gap=0.8, clearance=0.4)
-                except Exception:
-                    pass
                 for _ in range(int(rng.integers(0, 20))):
                     world.people.step(0.2, truth)
             scan = lidar.scan(world, truth, 0.0)
@@ -73,7 +73,9 @@ def measure(seeds: int, poses: int, people: int, seed: int = 0) -> list[dict]:
             for _ in range(4):
                 if far.shape[0]:
                     p = far[int(rng.integers(far.shape[0]))]
-                    hyps.append(("shift", Pose2D(float(p[0]), float(p[1]), float(rng.uniform(-math.pi, math.pi)))))
+                    hyps.append(
+                        ("shift", Pose2D(float(p[0]), float(p[1]), float(rng.uniform(-math.pi, math.pi))))
+                    )
             for _ in range(2):
                 turn = float(rng.uniform(math.radians(30), math.pi)) * float(rng.choice([-1.0, 1.0]))
                 hyps.append(("turn", Pose2D(truth.x, truth.y, float(wrap_angle(truth.theta + turn)))))
@@ -107,34 +109,37 @@ def measure(seeds: int, poses: int, people: int, seed: int = 0) -> list[dict]:
     return rows
 
 
+def _groups(rows: list[dict], fam: str, key: str) -> tuple[np.ndarray, np.ndarray]:
+    """Fits of initial poses at the truth, and of wrong hypotheses whose estimate stayed wrong."""
+    sel = [r for r in rows if fam in ("ALL", r["family"])]
+    true = np.array([r[key] for r in sel if r["kind"] == "true"])
+    wrong = np.array([r[key] for r in sel if r["kind"] != "true" and r["label"] == "wrong"])
+    return true, wrong
+
+
+def _q(a: np.ndarray) -> str:
+    if a.size == 0:
+        return "-"
+    p5, p50, p95 = np.percentile(a, [5, 50, 95])
+    return f"n={a.size} min {a.min():.2f} p5 {p5:.2f} p50 {p50:.2f} p95 {p95:.2f} max {a.max():.2f}"
+
+
 def _summary(rows: list[dict], key: str) -> None:
-    fams = sorted({r["family"] for r in rows})
     print(f"\n== {key}")
-    for fam in fams + ["ALL"]:
-        sel = [r for r in rows if fam in ("ALL", r["family"])]
-        right = np.array([r[key] for r in sel if r["label"] == "right"])
-        wrong = np.array([r[key] for r in sel if r["label"] == "wrong"])
-
-        def q(a: np.ndarray) -> str:
-            if a.size == 0:
-                return "-"
-            return "n=%d min %.2f p5 %.2f p50 %.2f max %.2f" % (
-                a.size, a.min(), np.percentile(a, 5), np.median(a), a.max())
-
-        print(f"{fam:18s} right: {q(right)} | wrong: {q(wrong)}")
+    for fam in [*sorted({r["family"] for r in rows}), "ALL"]:
+        true, wrong = _groups(rows, fam, key)
+        print(f"{fam:18s} true pose: {_q(true)} | wrong estimate: {_q(wrong)}")
 
 
 def _rates(rows: list[dict], key: str, thresholds: list[float]) -> None:
-    fams = sorted({r["family"] for r in rows})
     for t in thresholds:
         parts = []
-        for fam in fams + ["ALL"]:
-            sel = [r for r in rows if fam in ("ALL", r["family"])]
-            right = [r[key] for r in sel if r["label"] == "right"]
-            wrong = [r[key] for r in sel if r["label"] == "wrong"]
-            fr = sum(v < t for v in right) / max(len(right), 1)
-            fa = sum(v >= t for v in wrong) / max(len(wrong), 1)
-            parts.append(f"{fam}: refused {fr:.1%} accepted {fa:.1%}")
+        for fam in [*sorted({r["family"] for r in rows}), "ALL"]:
+            true, wrong = _groups(rows, fam, key)
+            parts.append(
+                f"{fam}: right refused {(true < t).sum()}/{true.size}, "
+                f"wrong accepted {(wrong >= t).sum()}/{wrong.size}"
+            )
         print(f"{key} >= {t}: " + "; ".join(parts))
 
 
@@ -154,6 +159,7 @@ def main() -> None:
         _summary(rows, key)
     for key in (f"inl{t:g}" for t in TOLERANCES):
         _rates(rows, key, [0.5, 0.6, 0.7, 0.8])
+    _rates(rows, "quality", [0.5, 0.7])
 
 
 if __name__ == "__main__":

@@ -82,7 +82,9 @@ def test_a_crowd_for_a_few_updates_does_not_revoke_localized_a_lasting_bad_fit_d
         fits = [_turn_one_update(rt, loc) for _ in range(o.unlocalized_updates)]
         assert max(fits) < o.localized_fit_off, fits
         assert not loc.localized
-        assert "not localized" in loc.not_localized_reason and f"fit {loc.fit:.2f}" in loc.not_localized_reason
+        assert (
+            "not localized" in loc.not_localized_reason and f"fit {loc.fit:.2f}" in loc.not_localized_reason
+        )
         lost = [e for e in s.events if e.get("status") == "lost"]
         assert lost and "fit" in lost[-1]["reason"], list(s.events)[-5:]
     finally:
