@@ -237,15 +237,29 @@ class Localization:
         needed) decides ``localized`` by the scan's fit (``_gate_on_fit``). The simulator's truth
         source is localized at once."""
         self.check_pose(pose)
+        o = self.options
         if cov is None:
-            o = self.options
             cov = np.diag([o.initial_std_xy**2, o.initial_std_xy**2, o.initial_std_yaw**2])
+        fit = self._fit_at(pose)
         with self._lock:
             self._pending.append(("initial_pose", (pose, np.asarray(cov, dtype=float))))
             self._requests_made += 1
-            self.localized = self.options.source == "truth"
+            # provisional until the filter's first update there judges (_gate_on_fit): a pose the
+            # latest scan already fits (or, before any scan, the operator's word as in Nav2) lets a
+            # caller that cannot wait for a tick (the synchronous sim stacks) send goals at once
+            self.localized = o.source == "truth" or fit is None or fit >= o.localized_fit_on
             self.global_running = False
         self.session.add_event("initial_pose", pose=[pose.x, pose.y, pose.theta])
+
+    def _fit_at(self, pose: Pose2D) -> float | None:
+        """``fit`` of the latest scan at ``pose`` on the active map; None without a scan or a filter.
+        Reads the filter's likelihood field only (immutable), so any thread may call it."""
+        scan, fut = self.session.last_scan, self._amcl_future
+        if scan is None or fut is None:
+            return None
+        field = fut.result(timeout=APPLY_TIMEOUT_S).likelihood_field
+        beams = sm.select_beams(scan, self.amcl_options)
+        return sm.scan_inlier_fraction(field, pose, self.laser_pose, beams, self.options.fit_tolerance)
 
     def start_global(self) -> None:
         """Spread the particles over the free space and rotate in place (mode LOCALIZING) until
@@ -362,7 +376,7 @@ class Localization:
             was = self.localized
             if good:
                 self.localized = True
-            elif was and self._low_fit_updates >= o.unlocalized_updates:
+            elif judging or (was and self._low_fit_updates >= o.unlocalized_updates):
                 self.localized = False
             now_localized = self.localized
         if now_localized and not was:
