@@ -107,6 +107,22 @@ class LocalizationOptions:
     flags ``map_mismatch``: the active map is probably not where the robot is."""
     converged_updates: int = 3
     """...and all of it held for this many consecutive filter updates."""
+    fit_tolerance: float = 0.1
+    """A beam's endpoint at the estimate is explained by the map when it lies within this (m, two
+    cells of a 0.05 m map) of a mapped obstacle; ``fit`` is the fraction of returning beams so
+    explained (``sensor_models.scan_inlier_fraction``). See docs/localization.md."""
+    localized_fit_on: float = 0.7
+    """``localized`` turns true at a filter update whose ``fit`` is at least this (and the spread
+    within ``localized_max_spread``): measured over seeded worlds, the right pose after an initial
+    pose fits at or above it, wrong poses below (docs/localization.md, bench/loc_criterion.py)."""
+    localized_fit_off: float = 0.5
+    """...and false again after ``unlocalized_updates`` consecutive updates fitting below this
+    (hysteresis: people walking past hide walls for a few scans)."""
+    unlocalized_updates: int = 5
+    """Consecutive updates below ``localized_fit_off`` that revoke ``localized``."""
+    localized_max_spread: float = 1.0
+    """Secondary bound: no ``localized`` while the estimate's x or y standard deviation exceeds this
+    (m): a cloud spread over the map (global localization, a reinitialize) has no pose to trust."""
     global_timeout: float = 60.0
     """Seconds of rotating before global localization gives up (event, back to IDLE)."""
     occupied_threshold: int = 65
@@ -152,6 +168,9 @@ class Localization:
         self._requests_made = 0
         self._awaiting: int | None = None  # requests applied, waiting for the filter's next update
         self.map_mismatch = False  # see _check_map_match
+        self._fit = 0.0  # fraction of beams the map explains at the estimate (see _gate_on_fit)
+        self._low_fit_updates = 0
+        self._judging = False  # an initial pose awaits its first update's verdict
         self._mismatch_updates = 0
         self.resets = 0  # times the estimate was reset (initial pose, global): costmaps clear their marks
         lid = session.profile.lidar
@@ -214,17 +233,33 @@ class Localization:
 
     def set_initial_pose(self, pose: Pose2D, cov: np.ndarray | None = None) -> None:
         """Rviz2's "2D Pose Estimate": validate, then reset AMCL around ``pose`` at the next tick.
-        The robot counts as localized at once (the operator vouches for the pose, as in Nav2)."""
+        Unlike Nav2 the operator's word is not enough: the filter's first update there (no motion
+        needed) decides ``localized`` by the scan's fit (``_gate_on_fit``). The simulator's truth
+        source is localized at once."""
         self.check_pose(pose)
+        o = self.options
         if cov is None:
-            o = self.options
             cov = np.diag([o.initial_std_xy**2, o.initial_std_xy**2, o.initial_std_yaw**2])
+        fit = self._fit_at(pose)
         with self._lock:
             self._pending.append(("initial_pose", (pose, np.asarray(cov, dtype=float))))
             self._requests_made += 1
-            self.localized = True
+            # provisional until the filter's first update there judges (_gate_on_fit): a pose the
+            # latest scan already fits (or, before any scan, the operator's word as in Nav2) lets a
+            # caller that cannot wait for a tick (the synchronous sim stacks) send goals at once
+            self.localized = o.source == "truth" or fit is None or fit >= o.localized_fit_on
             self.global_running = False
         self.session.add_event("initial_pose", pose=[pose.x, pose.y, pose.theta])
+
+    def _fit_at(self, pose: Pose2D) -> float | None:
+        """``fit`` of the latest scan at ``pose`` on the active map; None without a scan or a filter.
+        Reads the filter's likelihood field only (immutable), so any thread may call it."""
+        scan, fut = self.session.last_scan, self._amcl_future
+        if scan is None or fut is None:
+            return None
+        field = fut.result(timeout=APPLY_TIMEOUT_S).likelihood_field
+        beams = sm.select_beams(scan, self.amcl_options)
+        return sm.scan_inlier_fraction(field, pose, self.laser_pose, beams, self.options.fit_tolerance)
 
     def start_global(self) -> None:
         """Spread the particles over the free space and rotate in place (mode LOCALIZING) until
@@ -290,7 +325,13 @@ class Localization:
         self._particles = np.array(self.amcl.particles, dtype=np.float32)
         session.map_to_odom = self.amcl.map_to_odom()
         session.pose = session.map_to_odom.compose(session.odom_pose)
+        beams = sm.select_beams(frame.scan, self.amcl_options)
+        est, _ = self.amcl.estimate()
+        self._fit = sm.scan_inlier_fraction(
+            self.amcl.likelihood_field, est, self.laser_pose, beams, self.options.fit_tolerance
+        )
         self._check_map_match()
+        self._gate_on_fit()
         if self.global_running:
             self._check_global(now)
 
@@ -316,13 +357,64 @@ class Localization:
                 map_id=self.map_id,
             )
 
+    def _gate_on_fit(self) -> None:
+        """``localized`` with hysteresis on ``fit``: true at an update fitting at least
+        ``localized_fit_on`` with the spread within ``localized_max_spread``; false after
+        ``unlocalized_updates`` consecutive updates below ``localized_fit_off``. Global localization
+        decides for itself while it runs (``_check_global``)."""
+        if self.global_running:
+            return
+        o = self.options
+        good = (
+            self._fit >= o.localized_fit_on
+            and self.spread_xy <= o.localized_max_spread
+            and not self.map_mismatch
+        )
+        self._low_fit_updates = 0 if self._fit >= o.localized_fit_off else self._low_fit_updates + 1
+        judging, self._judging = self._judging, False
+        with self._lock:
+            was = self.localized
+            if good:
+                self.localized = True
+            elif judging or (was and self._low_fit_updates >= o.unlocalized_updates):
+                self.localized = False
+            now_localized = self.localized
+        if now_localized and not was:
+            self.session.add_event("localization", status="localized", reason=self._fit_text())
+        elif was and not now_localized:
+            self.session.add_event(
+                "localization",
+                status="lost",
+                reason=f"{self._fit_text()} for {self._low_fit_updates} updates: not localized",
+            )
+        elif judging and not now_localized:
+            self.session.add_event(
+                "localization", status="initial pose refused", reason=self.not_localized_reason
+            )
+
+    def _fit_text(self) -> str:
+        return f"the scan fits the map at the estimate: fit {self._fit:.2f}"
+
+    @property
+    def not_localized_reason(self) -> str:
+        """Why goals are refused while not localized, naming the fit once the filter has one."""
+        o = self.options
+        base = "not localized: set the initial pose or run global localization"
+        if self.amcl is None or self.updates == 0 or self.options.source == "truth":
+            return base
+        return (
+            f"{base} (the scan fits the map at the estimate: fit {self._fit:.2f}, localized from "
+            f"{o.localized_fit_on:g}; spread {self.spread_xy:.2f} m)"
+        )
+
     def _apply(self, kind: str, arg: Any, now: float) -> None:
         self.session.restart_trail()  # every request here moves the estimate (or its frame) at once
         self.map_mismatch, self._mismatch_updates = False, 0
+        self._low_fit_updates, self._judging = 0, kind == "initial_pose"
         if kind == "map":
             self.amcl = None
             self._particles = None
-            self._quality = 0.0
+            self._quality = self._fit = 0.0
             return
         if self.grid is None:
             return
@@ -352,6 +444,7 @@ class Localization:
             and sd[1] < o.converged_std_xy
             and sd[2] < o.converged_std_yaw
             and self._quality >= o.min_quality
+            and self._fit >= o.localized_fit_on
         )
         self._good_updates = self._good_updates + 1 if good else 0
         if self._good_updates >= o.converged_updates:
@@ -380,7 +473,7 @@ class Localization:
             return
         session.map_to_odom = truth.compose(session.odom_pose.inverse())
         session.pose = truth
-        self._quality = 1.0
+        self._quality = self._fit = 1.0
 
     def _command(self, now: float) -> Twist2D | None:
         """Command source for LOCALIZING: rotate in place while global localization runs."""
@@ -400,6 +493,12 @@ class Localization:
     @property
     def quality(self) -> float:
         return self._quality
+
+    @property
+    def fit(self) -> float:
+        """Fraction (0..1) of the last scan's returning beams that end within ``fit_tolerance`` of a
+        mapped obstacle at the estimate: what ``localized`` is decided on."""
+        return self._fit
 
     @property
     def match_score(self) -> float:
@@ -432,6 +531,7 @@ class Localization:
             "spread_m": round(self.spread_xy, 4),
             "particles": 0 if amcl is None else amcl.particle_count,
             "quality": round(float(self._quality), 4),
+            "fit": round(float(self._fit), 4),
             "match_score": round(float(self.match_score), 4),
             "map_mismatch": self.map_mismatch,
             "updates": self.updates,
@@ -441,6 +541,11 @@ class Localization:
                 "matched_std_xy": o.matched_std_xy,
                 "min_quality": o.min_quality,
                 "mismatch_quality": o.mismatch_quality,
+                "fit_tolerance": o.fit_tolerance,
+                "localized_fit_on": o.localized_fit_on,
+                "localized_fit_off": o.localized_fit_off,
+                "unlocalized_updates": o.unlocalized_updates,
+                "localized_max_spread": o.localized_max_spread,
             },
         }
 

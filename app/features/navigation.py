@@ -689,7 +689,7 @@ class Navigation:
 
     def _guard(self) -> str | None:
         if not self.localization.localized:
-            return "not localized: set the initial pose or run global localization"
+            return self.localization.not_localized_reason
         if self._global_cm is None:
             return "no active map"
         return None
@@ -844,7 +844,7 @@ class Navigation:
     def _track_walkers(self, session: Session, frame: SensorFrame, now: float) -> None:
         """Track walkers in the lidar's returns (map frame, placed like the costmaps' marks) and
         hand them, moved on to ``now``, to a controller that predicts them."""
-        if not (self.localization.localized or self.mapping_live()):
+        if not (self.localization.localized or self._active or self.mapping_live()):
             self.walkers.reset()
         elif frame.scan is not None:
             laser = session.pose.compose(self.localization.laser_pose)
@@ -928,8 +928,11 @@ class Navigation:
                 )
             self._seen_resets = loc.resets
             self.clear_costmaps()
-        if not (loc.localized or self.mapping_live()):
-            return  # scans placed with an unknown pose would mark obstacles in the wrong places
+        # scans placed with an unknown pose would mark obstacles in the wrong places; a running goal
+        # keeps marking though: a crowd hiding the walls revokes ``localized`` (docs/localization.md)
+        # while what the lidar sees around the robot is still where the controller must not go
+        if not (loc.localized or self._active or self.mapping_live()):
+            return
         if frame.scan is None:
             # The window follows the robot at scan rate (>= 5 Hz: a few cm of travel); moving it
             # without new data would only re-inflate the same cells every tick.

@@ -141,6 +141,11 @@ class Amcl:
         return v
 
     @property
+    def likelihood_field(self) -> sm.LikelihoodField:
+        """The map's distance field the sensor model and the scan scores read."""
+        return self._field
+
+    @property
     def particle_count(self) -> int:
         return int(self._particles.shape[0])
 

@@ -36,7 +36,9 @@ class PoseIn(StrictModel):
 class LocalizationOut(Out):
     source: Literal["amcl", "truth"]
     localized: bool = Field(
-        description="the filter converged on the active map: see `converged` and docs/api.md (criterion)"
+        description="the scan fits the active map at the estimate: true at a filter update with "
+        "`fit >= criterion.localized_fit_on` (and spread within `localized_max_spread`), false after "
+        "`unlocalized_updates` updates below `localized_fit_off`; docs/localization.md (criterion)"
     )
     converged: bool = Field(
         description="at the last filter update the particle spread (larger x / y std) was within "
@@ -48,6 +50,10 @@ class LocalizationOut(Out):
     spread_m: float = Field(description="the estimate's larger x / y standard deviation, m")
     particles: int
     quality: float = Field(description="0..1, how well the last scan fits the map at the estimate")
+    fit: float = Field(
+        description="0..1, the fraction of the last scan's returns ending within `fit_tolerance` (m) "
+        "of a mapped obstacle at the estimate: what `localized` is decided on"
+    )
     match_score: float = Field(
         description="`quality` while the cloud is tight (spread within `matched_std_xy`), else 0"
     )
@@ -59,7 +65,9 @@ class LocalizationOut(Out):
     map_id: int | None
     map_version: int
     criterion: dict[str, float] = Field(
-        description="the thresholds: `matched_std_xy` (m), `min_quality`, `mismatch_quality` (0..1)"
+        description="the thresholds: `matched_std_xy` (m), `min_quality`, `mismatch_quality` (0..1), "
+        "`fit_tolerance` (m), `localized_fit_on`, `localized_fit_off` (0..1), `unlocalized_updates`, "
+        "`localized_max_spread` (m)"
     )
 
 
