@@ -17,6 +17,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 
 TOP_IMPORTS_ONLY = [
+    "app/features/localization.py",
     "app/features/exploration.py",
     "app/features/navigation.py",
     "app/features/zones.py",
@@ -27,7 +28,9 @@ TOP_IMPORTS_ONLY = [
     "bench/editor.py",
     "bench/explore.py",
     "bench/peers.py",
+    "bench/loc_criterion.py",
     "tests/test_app_session.py",
+    "tests/test_localization_criterion.py",
     "tests/test_map_edit.py",
     "tests/test_patrol.py",
     "tests/test_places_api.py",

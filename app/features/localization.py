@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Any, Literal
 import numpy as np
 
 from app.modes import Mode, no_lidar_reason
+from nav.localization import Amcl, AmclOptions
 from nav.localization import sensor_models as sm
 from nav.planning.goal import nearest_free_pose as nearest_traversable
 from nav.types import Costmap, OccupancyGrid, Pose2D, Twist2D
@@ -35,7 +36,6 @@ from nav.types import Costmap, OccupancyGrid, Pose2D, Twist2D
 if TYPE_CHECKING:
     from app.runtime import Runtime
     from app.session import Session
-    from nav.localization import Amcl, AmclOptions
     from robot.base import SensorFrame
 
 ORDER = 20
@@ -141,8 +141,6 @@ class Localization:
         seed: int = 0,
         map_id: int | None = None,
     ) -> None:
-        from nav.localization import AmclOptions
-
         self.session = session
         self.options = options or LocalizationOptions()
         robot_model = "omnidirectional" if session.profile.is_omni else "differential"
@@ -182,8 +180,6 @@ class Localization:
     def _prepare(self, grid: OccupancyGrid | None) -> None:
         """Build the filter for ``grid`` on a worker: its likelihood field (a distance transform of
         the whole map) takes long enough to stall a control tick."""
-        from nav.localization import Amcl
-
         if grid is None or self.options.source == "truth":
             self._amcl_future = None
             return
