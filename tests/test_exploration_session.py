@@ -13,7 +13,8 @@ from app.features.exploration import ENDED, ExplorationRefused, ExplorationState
 from app.features.navigation import NavigationRefused
 from app.modes import Mode
 from bench.explore import compare
-from nav.types import Pose2D, Twist2D
+from nav.types import LETHAL_OBSTACLE, OccupancyGrid, Pose2D, Twist2D
+from robot.base import SensorFrame
 
 APARTMENT_START = Pose2D(3.0, 3.5, 0.0)
 
@@ -212,3 +213,31 @@ def test_exploration_api(client):
     assert r.status_code == 409 and "already exploring" in r.json()["detail"]
     r = client.post("/api/exploration/stop")
     assert r.status_code == 200 and r.json()["state"] == "stopped"
+
+
+def test_a_live_map_rebuild_keeps_what_the_lidar_marked_in_the_local_costmap():
+    """Issue 18 (exploration contact): each map SLAM publishes rebuilds the costmaps; the local one
+    used to start over with an empty obstacle layer, so an obstacle the lidar had marked but the
+    live map did not hold yet (a chair leg, below SLAM's occupied threshold) was gone from what the
+    controller drove on until a scan saw it again. Here the published map holds no obstacle at all
+    and no scan comes after it: every cell the lidar had marked lethal must still be lethal."""
+    stack = _stack()
+    s, nav, mapping = stack.session, stack.navigation, stack.mapping
+    try:
+        mapping.start()
+        assert _run_until(stack, nav.mapping_live, 30.0)
+        s.run_for(2.0)
+        before = nav.local_costmap
+        rows, cols = np.nonzero(before.costs == LETHAL_OBSTACLE)
+        assert rows.size > 20, "local costmap without the walls the lidar saw"
+        marked = before.geometry.cell_to_world(rows, cols)
+        live = nav.live_grid
+        empty = OccupancyGrid(live.geometry, np.where(live.data > 0, 0, live.data).astype(live.data.dtype))
+        nav.on_live_map(empty, mapping.generation)
+        now = s.clock.now()
+        nav.tick(s, SensorFrame(stamp=now), now)  # the rebuild, with no scan this tick
+        assert nav.live_grid is empty
+        after = nav.local_costmap.cost_at(marked)
+        assert np.all(after == LETHAL_OBSTACLE), f"{np.count_nonzero(after != LETHAL_OBSTACLE)} marks lost"
+    finally:
+        s.close()

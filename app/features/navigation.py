@@ -498,11 +498,16 @@ class Navigation:
 
     def _apply_live_map(self, grid: OccupancyGrid, generation: int) -> None:
         """Rebuild both costmaps over the grown map (its geometry changes as SLAM extends it). The
-        local costmap's obstacle marks go with it; the next scan, a tick later, marks them again."""
+        local costmap keeps its obstacle layer: marks of what the map does not hold yet (a chair leg
+        the lidar saw) must not vanish until a scan sees them again (Nav2 keeps them too)."""
         m = self.mapping
         if m is None or not m.running or generation != m.generation:
             return  # stale: a map of a session that has ended
+        old_local = self._local
         self._build_costmaps(grid)
+        if old_local is not None and self._local is not None:
+            self._local.keep_observations(old_local)
+            self._local_cm = self._local.costmap()
         self.live_grid = grid
         self._live_generation = generation
 

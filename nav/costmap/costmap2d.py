@@ -19,6 +19,7 @@ independent snapshot that a planner worker may keep.
 
 from __future__ import annotations
 
+import copy
 import math
 from dataclasses import dataclass, field
 
@@ -333,6 +334,28 @@ class Costmap2D:
         self.geometry = new_geo
         self._base = self._static_window()
         self._dirty = (0, geo.height, 0, geo.width)
+
+    def keep_observations(self, old: Costmap2D) -> None:
+        """Take over ``old``'s obstacle layer (its marks, cleared cells and their stamps), moved to
+        this window: a costmap rebuilt over a grown map keeps what the sensors saw, as Nav2's obstacle
+        layer does when the static layer gets a new map. Without it, an obstacle the map does not
+        hold (a chair leg seen by the lidar, not yet occupied in SLAM's map) is gone until a scan
+        sees it again, and one hidden from the next scans (occluded, beyond the marking range) is
+        gone until it is, while the controller drives on a costmap without it."""
+        mine, theirs = self._obstacles, old._obstacles
+        if mine is None or theirs is None:
+            return
+        if (
+            abs(theirs.geometry.resolution - self.geometry.resolution) > 1e-12
+            or theirs.costs.shape != mine.costs.shape
+            or theirs.default_value != mine.default_value
+            or bool(theirs.seen.shape[0]) != bool(mine.seen.shape[0])
+        ):
+            raise CostmapError("keep_observations needs a costmap of the same resolution, size and layers")
+        taken = copy.deepcopy(theirs)  # the old costmap's snapshots stay as they were
+        taken.set_geometry(self.geometry)
+        self._obstacles = taken
+        self._dirty = (0, self.geometry.height, 0, self.geometry.width)
 
     def clear(self) -> None:
         """Reset the obstacle layer (Nav2 ``clearEntireCostmap`` / the ClearCostmap behaviour)."""
