@@ -46,6 +46,7 @@ def _known_free_goal(stack, near: Pose2D, at_least: float) -> Pose2D:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(1200)  # ~3.5 min of CPU on the virtual clock; several times that on a busy machine
 def test_exploring_the_apartment_maps_it_to_the_end():
     stack = _stack()
     s, ex = stack.session, stack.exploration

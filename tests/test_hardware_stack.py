@@ -237,9 +237,12 @@ def test_silent_base_faults_after_the_link_timeout(pair: EmulatorPair, server: E
         # not before the timeout: the silence the driver measured when it gave up (wall-clock bounds
         # on how soon after it the fault shows failed on a loaded CI machine; the fault within one
         # control period is the session tests' check on the virtual clock)
-        found = re.search(r"no telemetry from \S+ for (\d+) ms", session.fault or "")
-        assert found is not None, session.fault
-        assert int(found.group(1)) >= 300, session.fault
+        # (the link's own reason too: on a starved machine the lidar's driver may also report silence,
+        # and the fault then shows the cause present last)
+        seen = f"{session.fault or ''} | {session.link_reason}"
+        found = re.search(r"no telemetry from \S+ for (\d+) ms", seen)
+        assert found is not None, seen
+        assert int(found.group(1)) >= 300, seen
         # the base still listens: the host's stop reached it
         assert wait_for(lambda: pair.base.last_command is not None and pair.base.last_command.vx == 0.0, 1.0)
         pair.base.faults.stall = False

@@ -117,7 +117,7 @@ def list_places(
     ),
 )
 def create_place(
-    map_id: int, body: PlaceIn, rt: RuntimeDep, places: PlacesDep, response: Response
+    map_id: DbId, body: PlaceIn, rt: RuntimeDep, places: PlacesDep, response: Response
 ) -> PlaceOut:
     grid = rt.maps.grid(map_id)
     if grid is None:

@@ -336,7 +336,7 @@ def run_map_png(run_id: DbId, store: StoreDep) -> Response:
     responses=NOT_FOUND,
 )
 def state_at(
-    run_id: int, store: StoreDep, t: Annotated[float, Query(ge=0, allow_inf_nan=False)] = 0.0
+    run_id: DbId, store: StoreDep, t: Annotated[float, Query(ge=0, allow_inf_nan=False)] = 0.0
 ) -> dict:
     from app.runs.codec import MODES
 
