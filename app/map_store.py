@@ -100,17 +100,9 @@ class MapStore:
         version: int = 1,
     ) -> MapInfo:
         """Store a map in one transaction (all or nothing)."""
-        g = grid.geometry
-        rec = MapRecord(
-            name=name,
-            resolution=g.resolution,
-            origin_x=g.origin.x,
-            origin_y=g.origin.y,
-            origin_yaw=g.origin.theta,
-            width=g.width,
-            height=g.height,
-            data=zlib.compress(np.ascontiguousarray(grid.data, dtype=np.int8).tobytes(), 6),
-            thumbnail_png=thumbnail_png(grid),
+        rec = map_record(
+            name,
+            grid,
             source=source,
             is_stock=is_stock,
             robot_id=robot_id,
@@ -233,3 +225,35 @@ class MapStore:
                 if self.find(name, stock=True) is None:  # a different constraint failed: not the race
                     raise
         return added
+
+
+def map_record(
+    name: str,
+    grid: OccupancyGrid,
+    *,
+    source: str = "import",
+    is_stock: bool = False,
+    robot_id: int | None = None,
+    run_id: int | None = None,
+    parent_id: int | None = None,
+    version: int = 1,
+) -> MapRecord:
+    """The database row of a map (grid compressed, thumbnail rendered), not yet stored."""
+    g = grid.geometry
+    return MapRecord(
+        name=name,
+        resolution=g.resolution,
+        origin_x=g.origin.x,
+        origin_y=g.origin.y,
+        origin_yaw=g.origin.theta,
+        width=g.width,
+        height=g.height,
+        data=zlib.compress(np.ascontiguousarray(grid.data, dtype=np.int8).tobytes(), 6),
+        thumbnail_png=thumbnail_png(grid),
+        source=source,
+        is_stock=is_stock,
+        robot_id=robot_id,
+        run_id=run_id,
+        parent_id=parent_id,
+        version=version,
+    )

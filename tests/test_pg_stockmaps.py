@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import subprocess
 import sys
-import zlib
 from pathlib import Path
 
 import numpy as np
@@ -16,8 +15,8 @@ from sqlalchemy import text
 from sqlmodel import Session
 
 from app.db import make_engine, migrate
-from app.map_store import MapStore, thumbnail_png
-from app.models import MapRecord, Run
+from app.map_store import MapStore, map_record
+from app.models import Run
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 
 # Each process migrates, then registers two stock worlds. Its loader waits at a file barrier until every
@@ -94,20 +93,7 @@ def insert_map_at_0003(
 ) -> int:
     """A map row written with the columns the schema had at 0003 (today's model has later columns,
     such as 0007's parent_id and version, that the old table lacks)."""
-    g = grid.geometry
-    rec = MapRecord(
-        name=name,
-        resolution=g.resolution,
-        origin_x=g.origin.x,
-        origin_y=g.origin.y,
-        origin_yaw=g.origin.theta,
-        width=g.width,
-        height=g.height,
-        data=zlib.compress(np.ascontiguousarray(grid.data, dtype=np.int8).tobytes(), 6),
-        thumbnail_png=thumbnail_png(grid),
-        source=source,
-        is_stock=is_stock,
-    )
+    rec = map_record(name, grid, source=source, is_stock=is_stock)
     maps = sa.Table("maps", sa.MetaData(), autoload_with=engine)
     values = {c.name: getattr(rec, c.name) for c in maps.columns if c.name != "id"}
     with engine.begin() as conn:
