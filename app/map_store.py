@@ -240,6 +240,8 @@ def map_record(
 ) -> MapRecord:
     """The database row of a map (grid compressed, thumbnail rendered), not yet stored."""
     g = grid.geometry
+    if g.width <= 0 or g.height <= 0:
+        raise ValueError(f"a map needs cells; this one is {g.width} x {g.height}")
     return MapRecord(
         name=name,
         resolution=g.resolution,

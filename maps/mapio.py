@@ -252,6 +252,8 @@ def decode_png(data: bytes, max_pixels: int = DEFAULT_MAX_PIXELS) -> tuple[np.nd
     """Decode a PNG (via imageio) into shades in [0, 1] and an optional alpha mask (True = opaque)."""
     if len(data) >= 24 and data[:8] == b"\x89PNG\r\n\x1a\n":
         w, h = int.from_bytes(data[16:20], "big"), int.from_bytes(data[20:24], "big")
+        if w <= 0 or h <= 0:
+            raise MapFormatError(f"PNG has invalid size {w} x {h}")
         if w * h > max_pixels:
             raise MapFormatError(f"PNG is {w} x {h} = {w * h} pixels, more than the limit of {max_pixels}")
     else:

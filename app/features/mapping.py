@@ -246,10 +246,10 @@ class Mapping:
         if job is not None:  # the last job submitted; once stopped, the final optimization
             done_slam, pub = job.result(timeout)
             if not running and done_slam is slam:
-                return pub.grid
+                return _nonempty(pub.grid)
         elif not running and grid is not None:
-            return grid
-        return slam.map()
+            return _nonempty(grid)
+        return _nonempty(slam.map())
 
     # ------------------------------------------------------------------ the stage (loop thread)
     def tick(self, session: Session, frame: SensorFrame, now: float) -> None:
@@ -462,3 +462,10 @@ def setup(runtime: Runtime) -> Mapping:
     mapping.on_finished = hand_off
     runtime.session.add_stage(mapping)
     return mapping
+
+
+def _nonempty(grid: OccupancyGrid) -> OccupancyGrid:
+    """A map with no cells (no scan has been inserted yet) is no map to save or navigate on."""
+    if grid.data.size == 0:
+        raise NoMapError("no map to save yet: the first scan has not been added; drive a little first")
+    return grid

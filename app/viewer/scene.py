@@ -36,7 +36,7 @@ import viser
 
 from app.bus import Snapshot, SnapshotBus, Subscription
 from app.viewer import geometry as geo
-from app.viewer import palette
+from app.viewer import loop_safe, palette
 from app.viewer.pose_input import (
     PoseInputError,
     ground_through,
@@ -213,6 +213,7 @@ class Viewer:
             return
         # viser prints a panel with its own port even when not verbose; users open the dashboard's
         # address (the relay), so that port must not look like one to open
+        loop_safe.install()  # viser's buffers must survive pushes from our threads (loop_safe.py)
         with quiet_viser():
             self._server = viser.ViserServer(host="127.0.0.1", port=0, verbose=False)
         self._last.clear()  # a restarted server has an empty scene: redraw everything
