@@ -36,7 +36,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
         yield s
 
 
-
 def new_page(browser):
     ctx = browser.new_context(
         viewport={"width": 1024, "height": 768}, bypass_csp=True

@@ -66,7 +66,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
         yield s
 
 
-
 @pytest.fixture(scope="module")
 def page(browser, server: EmbeddedServer):
     # bypass_csp: Playwright's wait_for_function evaluates strings, which the pages' CSP (rightly) forbids

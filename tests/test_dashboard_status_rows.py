@@ -41,7 +41,6 @@ def patient_url(pair: EmulatorPair) -> str:
     return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0"
 
 
-
 @pytest.fixture
 def page(browser):
     ctx = browser.new_context(viewport={"width": 1280, "height": 800}, bypass_csp=True)

@@ -33,7 +33,6 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
         yield s
 
 
-
 def new_page(browser, **kw):
     # bypass_csp: Playwright's wait_for_function evaluates strings, which the pages' CSP (rightly) forbids
     ctx = browser.new_context(viewport=VIEWPORT, bypass_csp=kw.pop("bypass_csp", True), **kw)
