@@ -7,8 +7,12 @@ from typing import Annotated
 from fastapi import Depends, Request, WebSocket
 from pydantic import BaseModel, ConfigDict
 
+from app.api.problems import ProblemError
+from app.api.schemas import DbId
+from app.map_store import MapInfo
 from app.runtime import Runtime
 from app.security import principal_of
+from nav.types import OccupancyGrid
 
 
 class StrictModel(BaseModel):
@@ -35,3 +39,25 @@ def get_actor(request: Request) -> str:
 
 
 ActorDep = Annotated[str, Depends(get_actor)]
+
+
+def get_map_info(map_id: DbId, rt: RuntimeDep) -> MapInfo:
+    """The stored map the path names, or 404 (one place for every ``/api/maps/{map_id}/...`` route)."""
+    info = rt.maps.info(map_id)
+    if info is None:
+        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
+    return info
+
+
+MapInfoDep = Annotated[MapInfo, Depends(get_map_info)]
+
+
+def get_map_grid(map_id: DbId, rt: RuntimeDep) -> OccupancyGrid:
+    """The occupancy grid of the map the path names, or 404."""
+    grid = rt.maps.grid(map_id)
+    if grid is None:
+        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
+    return grid
+
+
+MapGridDep = Annotated[OccupancyGrid, Depends(get_map_grid)]

@@ -13,7 +13,7 @@ from fastapi import APIRouter, Query, Response
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
-from app.api.deps import RuntimeDep, StrictModel
+from app.api.deps import MapGridDep, MapInfoDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError
 from app.api.routes.maps import MapOut, active_map_id, map_out
 from app.api.schemas import ERRORS, DbId, Page, Pair
@@ -92,11 +92,9 @@ def _operation(op: BrushOp | LineOp | PolygonOp) -> Operation:
     summary="Save an edit of a map as its new version (not activated)",
     responses=ERRORS(s404="no such map", s422="an invalid polygon"),
 )
-async def edit_map(map_id: DbId, body: EditIn, rt: RuntimeDep, response: Response) -> EditOut:
-    parent = rt.maps.info(map_id)
-    grid = rt.maps.grid(map_id) if parent is not None else None
-    if parent is None or grid is None:
-        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
+async def edit_map(
+    map_id: DbId, body: EditIn, parent: MapInfoDep, grid: MapGridDep, rt: RuntimeDep, response: Response
+) -> EditOut:
     ops = [_operation(op) for op in body.operations]
     edited, bounds, n = await run_in_threadpool(apply_edits, grid, ops)
     info = await run_in_threadpool(rt.maps.add_version, parent, edited)

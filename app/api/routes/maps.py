@@ -13,7 +13,7 @@ from fastapi.concurrency import run_in_threadpool
 from fastapi.responses import Response
 from pydantic import Field
 
-from app.api.deps import RuntimeDep, StrictModel
+from app.api.deps import MapInfoDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp, Triple
 from app.features.localization import map_fit
@@ -94,10 +94,7 @@ def list_maps(
 
 
 @router.get("/api/maps/{map_id}", response_model=MapOut, summary="One map's metadata", responses=NOT_FOUND)
-def get_map(map_id: DbId, rt: RuntimeDep) -> MapOut:
-    info = rt.maps.info(map_id)
-    if info is None:
-        raise HTTPException(404, f"no map with id {map_id}")
+def get_map(info: MapInfoDep, rt: RuntimeDep) -> MapOut:
     return map_out(info, active_map_id(rt))
 
 

@@ -12,7 +12,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Depends, Query, Response
 from pydantic import Field
 
-from app.api.deps import ActorDep, RuntimeDep, StrictModel
+from app.api.deps import ActorDep, MapGridDep, MapInfoDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError
 from app.api.routes.maps import active_map_id
 from app.api.routes.missions import MissionOut, MissionsDep, PoseIn, mission_out, start_mission
@@ -95,13 +95,11 @@ def resolve_place(rt: Any, name: str) -> Pose2D:
 )
 def list_places(
     map_id: DbId,
-    rt: RuntimeDep,
+    _map: MapInfoDep,
     places: PlacesDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0)] = 0,
 ) -> PlacePage:
-    if rt.maps.info(map_id) is None:
-        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
     found = places.for_map(map_id)
     items = [place_out(p) for p in found[offset : offset + limit]]
     return PlacePage(total=len(found), limit=limit, offset=offset, items=items, map_id=map_id)
@@ -117,11 +115,8 @@ def list_places(
     ),
 )
 def create_place(
-    map_id: DbId, body: PlaceIn, rt: RuntimeDep, places: PlacesDep, response: Response
+    map_id: DbId, body: PlaceIn, grid: MapGridDep, places: PlacesDep, response: Response
 ) -> PlaceOut:
-    grid = rt.maps.grid(map_id)
-    if grid is None:
-        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
     geo = grid.geometry
     rows, cols = geo.world_to_cell(Pose2D(body.x, body.y).as_array()[None, :2])
     if not geo.in_bounds(rows, cols)[0]:

@@ -14,7 +14,7 @@ from fastapi import APIRouter, Depends, File, Form, Query, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field, model_validator
 
-from app.api.deps import RuntimeDep, StrictModel
+from app.api.deps import MapInfoDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp
 from app.features.zones import Zones
@@ -131,13 +131,11 @@ def _zone(zones: Zones, zone_id: int) -> Zone:
 )
 def list_zones(
     map_id: DbId,
-    rt: RuntimeDep,
+    _map: MapInfoDep,
     zones: ZonesDep,
     limit: Annotated[int, Query(ge=1, le=500)] = 100,
     offset: Annotated[int, Query(ge=0)] = 0,
 ) -> ZonePage:
-    if rt.maps.info(map_id) is None:
-        raise ProblemError(404, f"no map with id {map_id}", kind="not-found")
     found = zones.store.for_map(map_id)
     items = [zone_out(z) for z in found[offset : offset + limit]]
     return ZonePage(total=len(found), limit=limit, offset=offset, items=items, map_id=map_id)
