@@ -26,6 +26,13 @@ CHROMIUM_ARGS = [
 ]
 
 
+BROWSER_MARKS = [
+    pytest.mark.browser,
+    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
+]
+"""``pytestmark`` of every browser-test module."""
+
+
 def make_settings(tmp_path: Path, **overrides):
     from app.settings import Settings
 

@@ -11,16 +11,13 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from conftest import ARTIFACTS, make_settings
-from test_dashboard_browser import CHROMIUM, LONG
+from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
+from test_dashboard_browser import LONG
 
 from app.auth import UserStore
 from app.embedded import EmbeddedServer, serve_in_thread
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 OPERATOR = ("olga", "operator-pass-1")
 VIEWER = ("victor", "viewer-pass-1")

@@ -15,7 +15,7 @@ from collections.abc import Iterator
 import httpx
 import numpy as np
 import pytest
-from conftest import ARTIFACTS, CHROMIUM, CHROMIUM_ARGS, make_settings
+from conftest import ARTIFACTS, BROWSER_MARKS, CHROMIUM_ARGS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
 from app.viewer import palette
@@ -24,10 +24,7 @@ from nav.types import Pose2D
 ARGS = CHROMIUM_ARGS
 LONG = 120_000  # ms: the main page can stall while the 3D view renders in software
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 PERF: dict[str, float] = {}
 

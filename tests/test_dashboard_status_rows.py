@@ -15,7 +15,7 @@ from contextlib import contextmanager
 
 import httpx
 import pytest
-from conftest import make_settings
+from conftest import BROWSER_MARKS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
 from robot.profiles import load_profile
@@ -26,10 +26,7 @@ from robot.serial.protocol import ParamId
 CHROMIUM = pathlib.Path("/usr/bin/chromium")
 LONG = 60_000  # ms
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 PROFILE = load_profile("skid4")
 

@@ -8,16 +8,13 @@ import time
 from collections.abc import Iterator
 
 import pytest
-from conftest import ARTIFACTS, CHROMIUM, make_settings
+from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
 LONG = 120_000  # ms: the page can stall while the 3D view renders in software
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 
 @pytest.fixture(scope="module")

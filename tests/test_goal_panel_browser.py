@@ -8,14 +8,11 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
-from conftest import ARTIFACTS, CHROMIUM, make_settings
+from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 LONG = 120_000
 
 

@@ -3,41 +3,27 @@ viser's 3D view (inline, self-unpacking client) load with zero CSP violations (a
 
 from __future__ import annotations
 
-import pathlib
+from conftest import BROWSER_MARKS
 
-import pytest
-
-CHROMIUM = pathlib.Path("/usr/bin/chromium")
-
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 
-def test_pages_load_under_the_csp(live_server_viewer) -> None:
-    sync_api = pytest.importorskip("playwright.sync_api")
+def test_pages_load_under_the_csp(live_server_viewer, browser) -> None:
     violations: list[str] = []
-    with sync_api.sync_playwright() as pw:
-        browser = pw.chromium.launch(
-            executable_path=str(CHROMIUM),
-            headless=True,
-            args=["--no-sandbox", "--use-angle=swiftshader", "--enable-unsafe-swiftshader"],
+    page = browser.new_page(viewport={"width": 800, "height": 500})
+    try:
+        page.on(
+            "console",
+            lambda m: violations.append(m.text) if "Content Security Policy" in m.text else None,
         )
-        try:
-            page = browser.new_page(viewport={"width": 800, "height": 500})
-            page.on(
-                "console",
-                lambda m: violations.append(m.text) if "Content Security Policy" in m.text else None,
-            )
-            resp = page.goto(f"{live_server_viewer.url}/viz/?fixedDpr=1")
-            assert resp is not None and "script-src" in resp.headers["content-security-policy"]
-            page.wait_for_selector("canvas", timeout=60_000)
-            page.wait_for_timeout(1500)
-            resp = page.goto(f"{live_server_viewer.url}/")
-            assert resp is not None and resp.headers["x-frame-options"] == "SAMEORIGIN"
-            page.wait_for_load_state("load", timeout=30_000)
-            page.wait_for_timeout(2000)  # module scripts, websockets, the framed 3D view
-        finally:
-            browser.close()
+        resp = page.goto(f"{live_server_viewer.url}/viz/?fixedDpr=1")
+        assert resp is not None and "script-src" in resp.headers["content-security-policy"]
+        page.wait_for_selector("canvas", timeout=60_000)
+        page.wait_for_timeout(1500)
+        resp = page.goto(f"{live_server_viewer.url}/")
+        assert resp is not None and resp.headers["x-frame-options"] == "SAMEORIGIN"
+        page.wait_for_load_state("load", timeout=30_000)
+        page.wait_for_timeout(2000)  # module scripts, websockets, the framed 3D view
+    finally:
+        page.close()
     assert violations == []

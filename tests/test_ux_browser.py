@@ -13,15 +13,12 @@ from html.parser import HTMLParser
 import httpx
 import numpy as np
 import pytest
-from conftest import ARTIFACTS, make_settings
-from test_dashboard_browser import CHROMIUM, LONG, visible_ground, wait_until
+from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
+from test_dashboard_browser import LONG, visible_ground, wait_until
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 VIEWPORT = {"width": 1400, "height": 900}  # the size issue 17 was seen at
 PAGES = ("/", "/maps.html", "/runs.html", "/login.html")

@@ -6,7 +6,7 @@ import pathlib
 import time
 
 import numpy as np
-import pytest
+from conftest import BROWSER_MARKS
 from test_viewer_relay import Served
 from test_viewer_scene import FOOTPRINT, make_scan, office_grid, snap
 
@@ -14,17 +14,12 @@ from app.bus import SnapshotBus
 from app.viewer.scene import Viewer
 from nav.types import Path, Pose2D
 
-CHROMIUM = pathlib.Path("/usr/bin/chromium")
 ARTIFACTS = pathlib.Path(__file__).resolve().parent.parent / "test-artifacts"
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 
-def test_browser_renders_viewer_and_click_sets_goal() -> None:
-    sync_api = pytest.importorskip("playwright.sync_api")
+def test_browser_renders_viewer_and_click_sets_goal(browser) -> None:
     got: list[tuple[str, Pose2D]] = []
     viewer = Viewer(SnapshotBus(), footprint=FOOTPRINT, on_pose_input=lambda k, p, _tab: got.append((k, p)))
     viewer.start()
@@ -34,19 +29,9 @@ def test_browser_renders_viewer_and_click_sets_goal() -> None:
         viewer.apply(
             snap(grid=office_grid(), grid_version=1, scan=make_scan(), path=path, particles=particles)
         )
-        with Served(viewer) as served, sync_api.sync_playwright() as pw:
-            browser = pw.chromium.launch(
-                executable_path=str(CHROMIUM),
-                headless=True,
-                args=[
-                    "--no-sandbox",
-                    "--use-angle=swiftshader",
-                    "--enable-unsafe-swiftshader",
-                    "--disable-background-networking",
-                ],
-            )
+        with Served(viewer) as served:
+            page = browser.new_page(viewport={"width": 960, "height": 600})
             try:
-                page = browser.new_page(viewport={"width": 960, "height": 600})
                 page.goto(f"http://127.0.0.1:{served.port}/viz/?fixedDpr=1")
                 page.wait_for_selector("canvas", timeout=60_000)
                 deadline = time.monotonic() + 60
@@ -71,7 +56,7 @@ def test_browser_renders_viewer_and_click_sets_goal() -> None:
                 while len(got) < 2 and time.monotonic() < deadline:
                     page.wait_for_timeout(100)
             finally:
-                browser.close()
+                page.close()
         assert (ARTIFACTS / "viewer.png").stat().st_size > 10_000
         assert got and got[0][0] == "goal" and got[0][1].is_finite()
         assert len(got) == 2, "shift+drag on the map did not set a pose"

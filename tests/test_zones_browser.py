@@ -7,8 +7,7 @@ import pathlib
 import time
 
 import numpy as np
-import pytest
-from conftest import CHROMIUM, CHROMIUM_ARGS
+from conftest import BROWSER_MARKS
 from test_viewer_relay import Served
 from test_viewer_scene import FOOTPRINT, snap
 
@@ -19,14 +18,10 @@ from maps.mapio import load_map_yaml
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 ARTIFACTS = ROOT / "test-artifacts"
 
-pytestmark = [
-    pytest.mark.browser,
-    pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
-]
+pytestmark = BROWSER_MARKS
 
 
-def test_zones_layer_renders_in_the_browser() -> None:
-    sync_api = pytest.importorskip("playwright.sync_api")
+def test_zones_layer_renders_in_the_browser(browser) -> None:
     viewer = Viewer(SnapshotBus(), footprint=FOOTPRINT)
     viewer.start()
     try:
@@ -35,10 +30,9 @@ def test_zones_layer_renders_in_the_browser() -> None:
         speed = np.array([[6.2, 0.4], [9.0, 0.4], [9.0, 2.4], [6.2, 2.4]])
         layer = (("keepout", "wet floor (keepout)", keepout), ("speed", "aisle (30 %)", speed))
         viewer.apply(snap(grid=grid, grid_version=1, extras={"zone_layer": layer}))
-        with Served(viewer) as served, sync_api.sync_playwright() as pw:
-            browser = pw.chromium.launch(executable_path=str(CHROMIUM), headless=True, args=CHROMIUM_ARGS)
+        with Served(viewer) as served:
+            page = browser.new_page(viewport={"width": 960, "height": 600})
             try:
-                page = browser.new_page(viewport={"width": 960, "height": 600})
                 page.goto(f"http://127.0.0.1:{served.port}/viz/?fixedDpr=1")
                 page.wait_for_selector("canvas", timeout=60_000)
                 deadline = time.monotonic() + 60
@@ -50,6 +44,6 @@ def test_zones_layer_renders_in_the_browser() -> None:
                 ARTIFACTS.mkdir(exist_ok=True)
                 page.screenshot(path=str(ARTIFACTS / "zones.png"), timeout=90_000)
             finally:
-                browser.close()
+                page.close()
     finally:
         viewer.stop()
