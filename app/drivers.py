@@ -21,6 +21,9 @@ class DriverBundle:
     grid: OccupancyGrid | None  # the world map shown before any other map is chosen
     start_pose: Pose2D
     world_name: str | None
+    lidar_timeout: float | None = None
+    """s of lidar silence the driver itself tolerates (the robot URL's ``lidar_timeout``); the session's
+    own silence limit is never shorter, or the URL's option could not lengthen it."""
 
 
 def resolve_world(world: str) -> Path:
@@ -60,7 +63,7 @@ def make_driver(robot: str, profile: RobotProfile, world: str, clock: Clock, see
             driver = SerialDriver.from_url_options(opts, profile, clock)
         except SerialError as exc:
             raise DriverConfigError(str(exc)) from exc
-        return DriverBundle(driver, None, Pose2D(), None)
+        return DriverBundle(driver, None, Pose2D(), None, lidar_timeout=opts.lidar_timeout)
     raise DriverConfigError(
         f"unknown robot {robot!r}: use 'sim' or 'serial:///dev/ttyUSB0?lidar=/dev/ttyUSB1'"
     )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -10,7 +11,7 @@ from sqlalchemy.engine import Engine
 
 from app.control import ControlLease
 from app.db import make_engine, migrate
-from app.drivers import make_driver
+from app.drivers import DriverBundle, make_driver
 from app.map_store import MapStore
 from app.robots import register_robot
 from app.session import Session, SessionOptions
@@ -56,7 +57,7 @@ class Runtime:
             clock=clock,
             grid=bundle.grid,
             start_pose=bundle.start_pose,
-            options=SessionOptions(rate_hz=settings.rate_hz),
+            options=session_options(settings, bundle),
             robot_name=settings.robot_name,
         )
         return cls(settings, profile, engine, maps, session, world_name=bundle.world_name, robot_id=robot_id)
@@ -121,3 +122,12 @@ def _register_stock_maps(maps: MapStore) -> None:
     from maps.stock import available_worlds, stock_world_path
 
     maps.register_stock({name: stock_world_path(name) for name in available_worlds()}, load_map_yaml)
+
+
+def session_options(settings: Settings, bundle: DriverBundle) -> SessionOptions:
+    """The session's options for this robot: the control rate, and a lidar silence limit no shorter
+    than the one the driver was configured with."""
+    options = SessionOptions(rate_hz=settings.rate_hz)
+    if bundle.lidar_timeout is None:
+        return options
+    return dataclasses.replace(options, lidar_timeout=max(options.lidar_timeout, bundle.lidar_timeout))

@@ -206,8 +206,10 @@ class SafetyFilter:
         self._ir_dir = np.array([[math.cos(s.yaw), math.sin(s.yaw)] for s in ir], dtype=float).reshape(-1, 2)
         self._ir_range = np.array([s.range for s in ir], dtype=float)
         # state between frames
-        self._scan_pts = np.zeros((0, 2))  # base_link at the scan's stamp
-        self._scan_vel = np.zeros((0, 2))  # predicted velocity of each reading, same frame
+        # the latest scan's readings (base_link at the scan's stamp) and each one's predicted velocity
+        # (same frame), swapped as one tuple: the telemetry thread reads them while a reflex command
+        # from the teleop thread may be ingesting a new scan
+        self._scan_readings: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 2)), np.zeros((0, 2)))
         # walkers between scans (base frame at each scan's stamp)
         self.walkers = WalkerTracker()
         # walkers are followed this far: within the approach horizon they can reach the footprint
@@ -215,8 +217,8 @@ class SafetyFilter:
         self._scan_stamp = -math.inf
         self._scan_shift = Pose2D()  # base at scan time -> base now
         self._garbage = 0.0  # fraction of garbage beams in the latest scan
-        self._ir_pts = np.zeros((0, 2))
-        self._ir_src = np.zeros(0, dtype=np.intp)
+        # triggered IR readings (base frame) and the sensor index of each, one tuple like the scan's
+        self._ir_readings: tuple[np.ndarray, np.ndarray] = (np.zeros((0, 2)), np.zeros(0, dtype=np.intp))
         self._ir_stamp = -math.inf
         self._ir_shift = Pose2D()
         self._last_stamp: float | None = None
@@ -252,7 +254,7 @@ class SafetyFilter:
             pts = self._mount.transform_points(pts) if pts.size else np.zeros((0, 2))
             vel = self.walkers.update(pts, scan.stamp, self._scan_shift.inverse())
             keep = (np.hypot(pts[:, 0], pts[:, 1]) <= self._scan_reach) | vel.any(axis=1)
-            self._scan_pts, self._scan_vel = pts[keep], vel[keep]
+            self._scan_readings = (pts[keep], vel[keep])
             self._scan_stamp = scan.stamp
             self._scan_shift = Pose2D()
             lag = now - scan.stamp
@@ -264,8 +266,7 @@ class SafetyFilter:
             rng = np.asarray(ir.ranges, dtype=float)
             rng = np.where(np.isfinite(rng), rng, self._ir_range)  # a digital switch: at its range
             k = np.flatnonzero(trig)
-            self._ir_pts = self._ir_xy[k] + self._ir_dir[k] * rng[k, None]
-            self._ir_src = k
+            self._ir_readings = (self._ir_xy[k] + self._ir_dir[k] * rng[k, None], k)
             self._ir_stamp = ir.stamp
             self._ir_shift = Pose2D()
 
@@ -274,20 +275,22 @@ class SafetyFilter:
         index (N,: -1 lidar, k >= 0 IR sensor k) and predicted velocities (N, 2), with each walker's
         readings moved on to ``now``."""
         parts, weights, srcs, vels = [], [], [], []
-        if self._scan_pts.shape[0]:
+        scan_pts, scan_vel = self._scan_readings
+        if scan_pts.shape[0]:
             back = self._scan_shift.inverse()
             c, s = math.cos(back.theta), math.sin(back.theta)
-            vel = self._scan_vel @ np.array([[c, s], [-s, c]])
-            pts = back.transform_points(self._scan_pts) + vel * max(now - self._scan_stamp, 0.0)
+            vel = scan_vel @ np.array([[c, s], [-s, c]])
+            pts = back.transform_points(scan_pts) + vel * max(now - self._scan_stamp, 0.0)
             parts.append(pts)
             weights.append(np.ones(pts.shape[0]))
             srcs.append(np.full(pts.shape[0], -1))
             vels.append(vel)
-        if self._ir_pts.shape[0] and now - self._ir_stamp <= self.options.ir_timeout:
-            parts.append(self._ir_shift.inverse().transform_points(self._ir_pts))
-            weights.append(np.full(self._ir_pts.shape[0], float(self.options.min_points)))
-            srcs.append(self._ir_src)
-            vels.append(np.zeros((self._ir_pts.shape[0], 2)))
+        ir_pts, ir_src = self._ir_readings
+        if ir_pts.shape[0] and now - self._ir_stamp <= self.options.ir_timeout:
+            parts.append(self._ir_shift.inverse().transform_points(ir_pts))
+            weights.append(np.full(ir_pts.shape[0], float(self.options.min_points)))
+            srcs.append(ir_src)
+            vels.append(np.zeros((ir_pts.shape[0], 2)))
         if not parts:
             return np.zeros((0, 2)), np.zeros(0), np.zeros(0, dtype=np.intp), np.zeros((0, 2))
         pts, vel = np.concatenate(parts), np.concatenate(vels)

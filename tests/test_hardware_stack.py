@@ -25,9 +25,12 @@ from conftest import teleop_until, twist
 from websockets.sync.client import connect
 
 from app.cli import main
+from app.drivers import DriverBundle, make_driver
 from app.embedded import EmbeddedServer, serve_in_thread
+from app.runtime import session_options
 from app.settings import Settings
 from nav.types import Pose2D
+from robot.clock import RealClock
 from robot.profiles import load_profile
 from robot.serial.driver import wait_for
 from robot.serial.emulate import EmulatorPair
@@ -490,3 +493,18 @@ def test_health_names_a_lidar_fault_and_clears_it_when_scans_return(
     assert httpx.post(f"{server.url}/api/robot/reset", timeout=10).status_code == 200
     state = httpx.get(f"{server.url}/api/robot", timeout=10).json()
     assert state["fault"] is None and state["health"]["lidar_fault"] is None
+
+
+def test_the_robot_urls_lidar_timeout_lengthens_the_sessions_silence_limit(
+    tmp_path: Path, pair: EmulatorPair
+) -> None:
+    """``lidar_timeout=3.0`` in the robot URL must hold for the whole stack: the session's own
+    1.5 s backstop faulted a loaded CI machine at 2.0 s of silence despite it."""
+    settings = make_settings(tmp_path, robot=patient(pair))
+    bundle = make_driver(settings.robot, load_profile(settings.profile), settings.world, RealClock(), 0)
+    try:
+        assert bundle.lidar_timeout == 3.0
+        assert session_options(settings, bundle).lidar_timeout == 3.0
+    finally:
+        bundle.driver.close()
+    assert session_options(settings, DriverBundle(bundle.driver, None, Pose2D(), None)).lidar_timeout == 1.5

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import sys
+import threading
 
 import numpy as np
 import pytest
@@ -225,3 +227,39 @@ def test_zero_command_within_one_cycle_of_the_crossing_reading() -> None:
         if crossed is not None:
             assert s.last_command.vx == 0.0
     assert crossed is not None and s.collisions == 0
+
+
+def test_readings_stay_consistent_while_another_thread_ingests_scans() -> None:
+    """The dashboard's contact report reads the filter from the control thread while a teleop reflex
+    command ingests a new scan on the websocket's thread: the reader must never see one scan's points
+    with another scan's velocities (seen in CI: "operands could not be broadcast (214,2) (357,2)")."""
+    f = SafetyFilter(SKID)
+    near = [wall_scan(0.0, x=0.3, beams=360), wall_scan(0.0, x=0.3, y=0.25, beams=720)]
+    errors: list[BaseException] = []
+    stop = threading.Event()
+
+    def ingest() -> None:
+        k = 0
+        while not stop.is_set():
+            t = 0.05 * k
+            scan = dataclasses.replace(near[k % 2], stamp=t)
+            f(Twist2D(), frame(t, scan))
+            k += 1
+
+    old = sys.getswitchinterval()
+    sys.setswitchinterval(1e-6)  # switch threads as often as possible: the window is a few bytecodes
+    writer = threading.Thread(target=ingest, daemon=True)
+    writer.start()
+    try:
+        for i in range(1500):
+            try:
+                f.nearest_reading(0.05 * i)
+                f.free_motions(0.05 * i)
+            except Exception as exc:
+                errors.append(exc)
+                break
+    finally:
+        stop.set()
+        writer.join(10.0)
+        sys.setswitchinterval(old)
+    assert errors == []
