@@ -49,137 +49,8 @@ def _octile(r: int, c: int, gr: int, gc: int) -> float:
 
 
 @njit(cache=True, nogil=True)
-def _search(
-    passable: np.ndarray,
-    cost: np.ndarray,
-    use_cost: bool,
-    cost_factor: float,
-    heuristic_weight: float,
-    sr: int,
-    sc: int,
-    gr: int,
-    gc: int,
-    width_f: float,
-    stamp: np.ndarray,
-    gen: int,
-    g: np.ndarray,
-    parent: np.ndarray,
-    bucket_of: np.ndarray,
-    e_node: np.ndarray,
-    e_next: np.ndarray,
-    head: np.ndarray,
-    out: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Search ``start -> goal`` on (H, W) ``passable`` (uint8 0/1). ``stamp[cell] == gen`` marks an
-    open cell of this search, ``gen + 1`` a closed one (anything else: unseen). ``out`` receives
-    [status, goal cost, expansions]. Returns the entry pool, grown if it had to be."""
-    h, w = passable.shape
-    n_buckets = head.shape[0]
-    mask = n_buckets - 1
-    inv = 1.0 / width_f
-    start = sr * w + sc
-    goal = gr * w + gc
-    f0 = heuristic_weight * _octile(sr, sc, gr, gc)
-    for i in range(n_buckets):
-        head[i] = -1
-    # entry pool: entries below ``top`` were handed out; e_next chains the bucket stacks and the
-    # free list of returned ones (nothing of the pool's size is initialised per call)
-    n_entries = e_node.shape[0]
-    free = -1
-    top = 1
-    closed = gen + 1
-    best = np.inf
-    stamp[start] = gen
-    g[start] = 0.0
-    parent[start] = -1
-    bucket_of[start] = 0
-    e_node[0] = start
-    e_next[0] = -1
-    head[0] = 0
-    live = 1
-    b = 0
-    expansions = 0
-    if start == goal:
-        best = 0.0
-    while live > 0:
-        slot = b & mask
-        e = head[slot]
-        if e < 0:
-            b += 1
-            continue
-        if f0 + b * width_f >= best:
-            break  # no open node can lead to a cheaper goal path
-        head[slot] = e_next[e]
-        e_next[e] = free
-        free = e
-        live -= 1
-        node = e_node[e]
-        if stamp[node] != gen or bucket_of[node] != b:
-            continue  # stale entry: the node moved to a lower bucket or was expanded since
-        stamp[node] = closed
-        expansions += 1
-        r = node // w
-        c = node - r * w
-        gn = g[node]
-        for k in range(8):
-            rr = r + _DR[k]
-            cc = c + _DC[k]
-            if rr < 0 or rr >= h or cc < 0 or cc >= w or passable[rr, cc] == 0:
-                continue
-            if k >= 4 and (passable[r, cc] == 0 or passable[rr, c] == 0):
-                continue  # no cutting past a blocked corner
-            nb = rr * w + cc
-            step = _STEP[k]
-            if use_cost:
-                step *= 1.0 + cost_factor * cost[rr, cc]
-            ng = gn + step
-            s = stamp[nb]
-            if (s == gen or s == closed) and ng >= g[nb]:
-                continue
-            g[nb] = ng
-            parent[nb] = node
-            if nb == goal:
-                stamp[nb] = closed  # never expanded: its cost is all the search needs
-                best = ng
-                continue
-            f = ng + heuristic_weight * _octile(rr, cc, gr, gc)
-            if f >= best:
-                stamp[nb] = closed  # cannot improve the goal; keep g so a worse path stays out
-                continue
-            nbk = int((f - f0) * inv)
-            if nbk < b:
-                nbk = b  # rounding: a consistent heuristic never lowers f
-            if s == gen and bucket_of[nb] == nbk:
-                continue  # already in that bucket
-            stamp[nb] = gen
-            bucket_of[nb] = nbk
-            if free >= 0:
-                e = free
-                free = e_next[e]
-            else:
-                if top == n_entries:  # grow the pool
-                    n_entries *= 2
-                    new_node = np.empty(n_entries, dtype=np.int32)
-                    new_next = np.empty(n_entries, dtype=np.int32)
-                    new_node[:top] = e_node
-                    new_next[:top] = e_next
-                    e_node = new_node
-                    e_next = new_next
-                e = top
-                top += 1
-            e_node[e] = nb
-            s2 = nbk & mask
-            e_next[e] = head[s2]
-            head[s2] = e
-            live += 1
-    out[0] = FOUND if best < np.inf else UNREACHABLE
-    out[1] = best
-    out[2] = expansions
-    return e_node, e_next
-
-
-@njit(cache=True, nogil=True)
 def _trace(parent: np.ndarray, node: int, w: int) -> np.ndarray:
+    """(N, 2) unpadded (row, col) cells of the parent chain ending at padded flat id ``node``."""
     n = 1
     k = node
     while parent[k] >= 0:
@@ -188,38 +59,157 @@ def _trace(parent: np.ndarray, node: int, w: int) -> np.ndarray:
     cells = np.empty((n, 2), dtype=np.int64)
     k = node
     for i in range(n - 1, -1, -1):
-        cells[i, 0] = k // w
-        cells[i, 1] = k % w
+        r = k // w
+        cells[i, 0] = r - 1
+        cells[i, 1] = k - r * w - 1
         k = parent[k]
     return cells
+
+
+@njit(cache=True, nogil=True)
+def _search(
+    passable: np.ndarray,
+    cost: np.ndarray,
+    use_cost: bool,
+    cost_factor: float,
+    heuristic_weight: float,
+    start: int,
+    goal: int,
+    width_f: float,
+    state: np.ndarray,
+    padded_cost: np.ndarray,
+    g: np.ndarray,
+    parent: np.ndarray,
+    buckets: np.ndarray,
+    counts: np.ndarray,
+    out: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Search ``start -> goal`` (padded flat ids) over (H, W) ``passable``.
+
+    ``state`` is the grid padded with a border of blocked cells (no bounds checks), (H + 2) *
+    (W + 2) flat: 0 unseen, 1 open, 2 closed, 3 blocked. ``g`` and ``parent`` are valid where state
+    is 1 or 2, so nothing else is initialised per search. ``buckets`` (a ring of LIFO stacks of cell
+    ids) and ``counts`` hold the open list; a cell may sit in several stacks (its f dropped): only
+    a pop that finds it open expands it. ``out`` receives [found, goal cost, expansions]. Returns
+    ``buckets`` (grown if a stack overflowed) and the path's (N, 2) cells (N = 0: not found)."""
+    h, wi = passable.shape
+    w = wi + 2
+    for r in range(h):
+        base = (r + 1) * w + 1
+        for c in range(wi):
+            state[base + c] = 0 if passable[r, c] else 3
+            if use_cost:
+                padded_cost[base + c] = cost[r, c]
+    n_buckets = counts.shape[0]
+    mask = n_buckets - 1
+    cap = buckets.shape[1]
+    inv = 1.0 / width_f
+    gr = goal // w
+    gc = goal - gr * w
+    sr = start // w
+    f0 = heuristic_weight * _octile(sr, start - sr * w, gr, gc)
+    counts[:] = 0
+    best = np.inf
+    state[start] = 1
+    g[start] = 0.0
+    parent[start] = -1
+    buckets[0, 0] = start
+    counts[0] = 1
+    live = 1
+    b = 0
+    expansions = 0
+    if start == goal:
+        best = 0.0
+    while live > 0:
+        slot = b & mask
+        top = counts[slot]
+        if top == 0:
+            b += 1
+            continue
+        if f0 + b * width_f >= best:
+            break  # every open cell's f (a lower bound of a path through it) reaches the goal's cost
+        top -= 1
+        counts[slot] = top
+        live -= 1
+        node = buckets[slot, top]
+        if state[node] != 1:
+            continue  # expanded already from a lower bucket (this entry is stale)
+        state[node] = 2
+        expansions += 1
+        r = node // w
+        c = node - r * w
+        gn = g[node]
+        for k in range(8):
+            dr = _DR[k]
+            dc = _DC[k]
+            nb = node + dr * w + dc
+            s = state[nb]
+            if s == 3:
+                continue
+            if k >= 4 and (state[node + dc] == 3 or state[node + dr * w] == 3):
+                continue  # no cutting past a blocked corner
+            step = _STEP[k]
+            if use_cost:
+                step *= 1.0 + cost_factor * padded_cost[nb]
+            ng = gn + step
+            if s != 0 and ng >= g[nb]:
+                continue
+            g[nb] = ng
+            parent[nb] = node
+            if nb == goal:
+                state[nb] = 2  # never expanded: its cost is all the search needs
+                best = ng
+                continue
+            f = ng + heuristic_weight * _octile(r + dr, c + dc, gr, gc)
+            if f >= best:
+                state[nb] = 2  # cannot lead to a cheaper goal path; g stays to keep worse ones out
+                continue
+            nbk = int((f - f0) * inv)
+            if nbk < b:
+                nbk = b  # rounding: a consistent heuristic never lowers f
+            state[nb] = 1
+            slot = nbk & mask
+            top = counts[slot]
+            if top == cap:  # grow every stack (rare)
+                grown = np.empty((n_buckets, 2 * cap), dtype=buckets.dtype)
+                grown[:, :cap] = buckets
+                buckets = grown
+                cap *= 2
+            buckets[slot, top] = nb
+            counts[slot] = top + 1
+            live += 1
+    out[0] = 1.0 if best < np.inf else 0.0
+    out[1] = best
+    out[2] = expansions
+    if best == np.inf:
+        return buckets, np.empty((0, 2), dtype=np.int64)
+    return buckets, _trace(parent, goal, w)
 
 
 class Workspace:
     """The per-cell arrays of searches over one grid size, reused call after call."""
 
     def __init__(self, height: int, width: int) -> None:
-        n = height * width
+        n = (height + 2) * (width + 2)
         if n >= 2**31:
             raise ValueError(f"grid of {height} x {width} cells is too large for int32 cell ids")
         self.shape = (height, width)
-        # np.empty/zeros do not fault pages in: a search touches only the cells it reaches.
-        self.stamp = np.zeros(n, dtype=np.uint32)
-        self.gen = 0
+        # the search state and the costs inside a border of blocked cells, the inside rewritten
+        # per search (flat, rows of width + 2)
+        self.state = np.full(n, 3, dtype=np.uint8)
+        self.cost = np.zeros(n, dtype=np.uint8)
+        # np.empty does not fault pages in: a search touches only the cells it reaches.
         self.g = np.empty(n)
         self.parent = np.empty(n, dtype=np.int32)
-        self.bucket_of = np.empty(n, dtype=np.int64)
-        entries = max(1024, min(n, 1 << 16))
-        self.e_node = np.empty(entries, dtype=np.int32)
-        self.e_next = np.empty(entries, dtype=np.int32)
+        self.buckets = np.empty((0, 0), dtype=np.int32)
+        self.counts = np.empty(0, dtype=np.int64)
         self.out = np.empty(3)
 
-    def next_gen(self) -> int:
-        """Stamp of the next search's open cells (closed is one more); clears on wrap-around."""
-        self.gen += 2
-        if self.gen >= 2**32 - 2:
-            self.stamp[:] = 0
-            self.gen = 2
-        return self.gen
+    def ring(self, n_buckets: int) -> None:
+        """Size the open list for ``n_buckets`` buckets (kept between searches)."""
+        if self.counts.shape[0] != n_buckets:
+            self.buckets = np.empty((n_buckets, 4096), dtype=np.int32)
+            self.counts = np.empty(n_buckets, dtype=np.int64)
 
 
 _local = threading.local()
@@ -256,43 +246,39 @@ def octile_search(
     (H, W) 0..255 cell costs weighted as in ``grid_search``. The start is expanded even if it is not
     passable (a robot may start in inflation); the goal must be passable (or be the start)."""
     h, w = passable.shape
-    for name, (r, c) in (("start", start), ("goal", goal)):
-        if not (0 <= r < h and 0 <= c < w):
-            raise ValueError(f"{name} {(r, c)} is outside the {h} x {w} grid")
-    if heuristic_weight < 0 or not math.isfinite(heuristic_weight):
-        raise ValueError(f"heuristic_weight must be finite and >= 0, got {heuristic_weight}")
-    ws = workspace_for(h, w)
-    grid = np.ascontiguousarray(passable).view(np.uint8) if passable.dtype == bool else passable
+    sr, sc = int(start[0]), int(start[1])
+    gr, gc = int(goal[0]), int(goal[1])
+    if not (0 <= sr < h and 0 <= sc < w and 0 <= gr < h and 0 <= gc < w):
+        raise ValueError(f"start {start} or goal {goal} is outside the {h} x {w} grid")
+    if not (0.0 <= heuristic_weight < math.inf) or not width > 0.0:
+        raise ValueError(f"heuristic_weight must be finite >= 0 and width > 0: {heuristic_weight}, {width}")
     use_cost = cost is not None and cost_travel_multiplier != 0.0
-    cost_arr = np.ascontiguousarray(cost, dtype=np.uint8) if use_cost else _NO_COST
+    if use_cost and cost.shape != passable.shape:
+        raise ValueError(f"cost {cost.shape} and passable {passable.shape} differ in shape")
     cost_factor = float(cost_travel_multiplier) / 252.0
-    max_step = SQRT2 * (1.0 + cost_factor * 255.0) if use_cost else SQRT2
-    head = np.empty(_n_buckets(max_step, heuristic_weight, width), dtype=np.int32)
-    ws.e_node, ws.e_next = _search(
-        np.ascontiguousarray(grid),
-        cost_arr,
+    ws = workspace_for(h, w)
+    ws.ring(_n_buckets(SQRT2 * (1.0 + cost_factor * 255.0) if use_cost else SQRT2, heuristic_weight, width))
+    pw = w + 2
+    ws.buckets, cells = _search(
+        passable,
+        cost if use_cost else _NO_COST,
         use_cost,
         cost_factor,
         float(heuristic_weight),
-        int(start[0]),
-        int(start[1]),
-        int(goal[0]),
-        int(goal[1]),
+        (sr + 1) * pw + sc + 1,
+        (gr + 1) * pw + gc + 1,
         float(width),
-        ws.stamp,
-        ws.next_gen(),
+        ws.state,
+        ws.cost,
         ws.g,
         ws.parent,
-        ws.bucket_of,
-        ws.e_node,
-        ws.e_next,
-        head,
+        ws.buckets,
+        ws.counts,
         ws.out,
     )
-    status, best, expansions = ws.out
-    if status != FOUND:
-        return math.inf, None, int(expansions)
-    return float(best), _trace(ws.parent, int(goal[0]) * w + int(goal[1]), w), int(expansions)
+    if not ws.out[0]:
+        return math.inf, None, int(ws.out[2])
+    return float(ws.out[1]), cells, int(ws.out[2])
 
 
 _NO_COST = np.zeros((1, 1), dtype=np.uint8)
