@@ -11,9 +11,9 @@ A* inputs: the Willow Garage floor (navigation_stage/willow-full-0.05, 0.2 m rob
 opposite extreme cells of the largest free region), a 2000 x 2000 grid with 20 % random blocked
 cells (seed 0, corner to corner) and 20 MovingAI den312d scenarios (the first 20 of
 ``den312d-random-1.scen``, whose optimal octile lengths are checked). Both sides get the same
-traversability with unit cell weight; navdeck runs its grid-search kernel (exact octile, no corner
-cutting), pyastar2d runs ``astar_path(..., allow_diagonal=True)`` (a diagonal step costs 1 and
-blocked corners may be cut: an easier problem).
+traversability with unit cell weight; navdeck runs the planner's kernel (``nav.planning.bucket_search``:
+exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., allow_diagonal=True)``
+(a diagonal step costs 1 and blocked corners may be cut: an easier problem).
 """
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ import numpy as np
 from bench.core import Benchmark, Figure
 from bench.datasets import MOVINGAI, ROS_MAPS
 from bench.planning import _component_corners, _real_map_costmap
-from nav.planning.grid_search import FOUND, SearchState
+from nav.planning.bucket_search import octile_search
 
 ROUNDS = 7
 WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
@@ -122,12 +122,9 @@ def willow_grid() -> tuple[np.ndarray, tuple[int, int], tuple[int, int]]:
 
 
 def navdeck_astar(passable: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> float:
-    """Exact octile A* path cost start -> goal (navdeck's compiled kernel); inf if unreachable."""
-    zero = np.zeros(passable.shape, dtype=np.uint8)
-    state = SearchState.create(passable, zero, start, goal)
-    if state.run(1 << 62) != FOUND:
-        return float("inf")
-    return state.cost_to(*goal)
+    """Exact octile A* path cost start -> goal (navdeck's bucketed kernel, which also traces the
+    path as pyastar2d does); inf if unreachable."""
+    return octile_search(passable, start, goal)[0]
 
 
 def _astar_rows(pyastar2d: ModuleType | None) -> list[Row]:

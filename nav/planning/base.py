@@ -15,6 +15,7 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
+from nav.planning.bucket_search import BucketSearch
 from nav.planning.errors import (
     GoalOccupied,
     GoalOutsideMap,
@@ -24,7 +25,7 @@ from nav.planning.errors import (
     StartOutsideMap,
 )
 from nav.planning.escape import descent_from_start
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SearchState
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND
 from nav.planning.smoothing import SmootherOptions, orientations, path_is_traversable, smooth_cells
 from nav.types import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION, Costmap, Path, Pose2D
 
@@ -170,7 +171,7 @@ class GridPlanner:
                 )
             target = near
 
-        state = SearchState.create(
+        state = BucketSearch(
             passable,
             costs,
             (sr, sc),

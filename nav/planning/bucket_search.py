@@ -1,21 +1,24 @@
-"""Exact 8-connected A* / Dijkstra with a bucketed open list and a reusable workspace, compiled with
-numba: the fast kernel beside ``grid_search`` (which stays the planner's resumable reference).
+"""Exact 8-connected A* / Dijkstra with a bucketed open list, compiled with numba: the planner's
+kernel. ``grid_search`` (indexed binary heap) stays as the reference it is tested against.
 
-Why buckets: the binary heap of ``grid_search`` pays O(log open) sifts per push and pop; here the
-open list is an array of buckets of f-width ``BUCKET_WIDTH`` (Dial 1969), each a LIFO stack, so a
-push and a pop are O(1). LIFO inside a bucket expands the newest (deepest) node first, the same
-effect as breaking f ties towards the larger g.
+Why buckets: a binary heap pays O(log open) sifts per push and pop; here the open list is a ring of
+buckets of f-width ``BUCKET_WIDTH`` (Dial 1969), each a LIFO stack, so a push and a pop are O(1).
+LIFO inside a bucket expands the newest (deepest) cell first, the effect of breaking f ties towards
+the larger g. Measured 2x faster than the heap kernel on the 2000 x 2000 random grid and Willow.
 
-Why it stays exact: a bucket holds f values up to ``BUCKET_WIDTH`` apart, so a node may be expanded
+Why it stays exact: a bucket holds f values up to ``BUCKET_WIDTH`` apart, so a cell may be expanded
 before its cheapest path is known. A later cheaper path re-opens it (label correcting), and the
 search stops only when the lowest bucket's lower f bound reaches the goal's cost: every path not yet
-explored passes an open node whose f (a lower bound of its cost, the heuristic being consistent) is
-at least that bound. Same rules and step costs as ``grid_search`` (no corner cutting, step
-``(1 or sqrt2) * (1 + cost_factor * cost)``, heuristic ``weight * octile``).
+explored passes an open cell whose f (a lower bound of its cost, the heuristic being consistent) is
+at least that bound. Same rules and step costs as ``grid_search``: no corner cutting, step
+``(1 or sqrt2) * (1 + cost_travel_multiplier * cost / 252)``, heuristic ``weight * octile``.
 
-Why a workspace: a search touches only the cells it reaches, so its arrays are reused between calls
-(same grid size) and a generation stamp marks which cells belong to the current search: nothing of
-the grid's size is allocated or cleared per call, and a small map's plan costs microseconds of set-up.
+Why few allocations: one byte per cell holds both traversability and search state (unseen, open,
+closed, blocked); ``g`` and ``parent`` are ``np.empty`` and read only where that byte says they are
+valid, so a search writes the grid once and then touches only the cells it reaches. ``octile_search``
+reuses one workspace per thread between calls on same-sized grids, so a small map's plan costs
+microseconds of set-up. Kernels are ``nogil``; ``run`` expands at most ``budget`` cells per call so
+the caller can check a wall-clock deadline between calls.
 """
 
 from __future__ import annotations
@@ -26,17 +29,19 @@ import threading
 import numpy as np
 from numba import njit
 
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND
+
 SQRT2 = math.sqrt(2.0)
-# f-width of one bucket. Measured (docs/benchmarks.md, "Peers"): narrower buckets re-open fewer
-# nodes but walk more empty ones; 0.5 cell was fastest on Willow, random 20 % and den312d alike.
+# f-width of one bucket, in cells. Measured on the three peer inputs: 0.25 re-opens fewer cells but
+# walks more empty buckets, 1.0 expands 6 % more cells on the random grid; 0.5 was best on all three.
 BUCKET_WIDTH = 0.5
 
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 _STEP = np.array([1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2])
 
-FOUND = 0
-UNREACHABLE = 1
+# ctl slots: where a resumable search stands between calls
+_PHASE, _BUCKET, _LIVE, _EXPANSIONS = 0, 1, 2, 3
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -67,6 +72,25 @@ def _trace(parent: np.ndarray, node: int, w: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def _fill(
+    passable: np.ndarray, cost: np.ndarray, use_cost: bool, state: np.ndarray, padded_cost: np.ndarray
+) -> None:
+    """Write the padded state (0 free, 3 blocked, a blocked border) and, if used, the costs."""
+    h, wi = passable.shape
+    w = wi + 2
+    state[:w] = 3
+    state[(h + 1) * w :] = 3
+    for r in range(h):
+        base = (r + 1) * w
+        state[base] = 3
+        state[base + w - 1] = 3
+        for c in range(wi):
+            state[base + 1 + c] = 0 if passable[r, c] else 3
+            if use_cost:
+                padded_cost[base + 1 + c] = cost[r, c]
+
+
+@njit(cache=True, nogil=True)
 def _search(
     passable: np.ndarray,
     cost: np.ndarray,
@@ -76,30 +100,26 @@ def _search(
     start: int,
     goal: int,
     width_f: float,
+    budget: int,
     state: np.ndarray,
     padded_cost: np.ndarray,
     g: np.ndarray,
     parent: np.ndarray,
     buckets: np.ndarray,
     counts: np.ndarray,
-    out: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Search ``start -> goal`` (padded flat ids) over (H, W) ``passable``.
+    ctl: np.ndarray,
+    best_out: np.ndarray,
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """Expand up to ``budget`` cells of the search ``start -> goal`` (padded flat ids) over (H, W)
+    ``passable``; the first call (``ctl[_PHASE] == 0``) writes the grid and seeds the start.
 
-    ``state`` is the grid padded with a border of blocked cells (no bounds checks), (H + 2) *
-    (W + 2) flat: 0 unseen, 1 open, 2 closed, 3 blocked. ``g`` and ``parent`` are valid where state
-    is 1 or 2, so nothing else is initialised per search. ``buckets`` (a ring of LIFO stacks of cell
-    ids) and ``counts`` hold the open list; a cell may sit in several stacks (its f dropped): only
-    a pop that finds it open expands it. ``out`` receives [found, goal cost, expansions]. Returns
-    ``buckets`` (grown if a stack overflowed) and the path's (N, 2) cells (N = 0: not found)."""
-    h, wi = passable.shape
-    w = wi + 2
-    for r in range(h):
-        base = (r + 1) * w + 1
-        for c in range(wi):
-            state[base + c] = 0 if passable[r, c] else 3
-            if use_cost:
-                padded_cost[base + c] = cost[r, c]
+    ``state`` is the grid inside a border of blocked cells (no bounds checks), (H + 2) * (W + 2)
+    flat: 0 unseen, 1 open, 2 closed, 3 blocked; ``g`` and ``parent`` are valid where it is 1 or 2.
+    ``buckets`` (a ring of LIFO stacks of cell ids) and ``counts`` hold the open list; a cell may sit
+    in several stacks (its f dropped): only a pop that finds it open expands it. ``best_out[0]`` is
+    the goal's cost so far. Returns ``buckets`` (grown if a stack overflowed), the status and, when
+    FOUND, the path's (N, 2) cells."""
+    w = passable.shape[1] + 2
     n_buckets = counts.shape[0]
     mask = n_buckets - 1
     cap = buckets.shape[1]
@@ -108,18 +128,23 @@ def _search(
     gc = goal - gr * w
     sr = start // w
     f0 = heuristic_weight * _octile(sr, start - sr * w, gr, gc)
-    counts[:] = 0
-    best = np.inf
-    state[start] = 1
-    g[start] = 0.0
-    parent[start] = -1
-    buckets[0, 0] = start
-    counts[0] = 1
-    live = 1
-    b = 0
-    expansions = 0
-    if start == goal:
-        best = 0.0
+    if ctl[_PHASE] == 0:
+        _fill(passable, cost, use_cost, state, padded_cost)
+        counts[:] = 0
+        state[start] = 1
+        g[start] = 0.0
+        parent[start] = -1
+        buckets[0, 0] = start
+        counts[0] = 1
+        ctl[:] = 0
+        ctl[_PHASE] = 1
+        ctl[_LIVE] = 1
+        best_out[0] = 0.0 if start == goal else np.inf
+    best = best_out[0]
+    b = ctl[_BUCKET]
+    live = ctl[_LIVE]
+    done = 0
+    status = EXHAUSTED
     while live > 0:
         slot = b & mask
         top = counts[slot]
@@ -128,6 +153,9 @@ def _search(
             continue
         if f0 + b * width_f >= best:
             break  # every open cell's f (a lower bound of a path through it) reaches the goal's cost
+        if done >= budget:
+            status = BUDGET
+            break
         top -= 1
         counts[slot] = top
         live -= 1
@@ -135,7 +163,7 @@ def _search(
         if state[node] != 1:
             continue  # expanded already from a lower bucket (this entry is stale)
         state[node] = 2
-        expansions += 1
+        done += 1
         r = node // w
         c = node - r * w
         gn = g[node]
@@ -146,14 +174,14 @@ def _search(
             s = state[nb]
             if s == 3:
                 continue
-            if k >= 4 and (state[node + dc] == 3 or state[node + dr * w] == 3):
-                continue  # no cutting past a blocked corner
             step = _STEP[k]
             if use_cost:
                 step *= 1.0 + cost_factor * padded_cost[nb]
             ng = gn + step
             if s != 0 and ng >= g[nb]:
-                continue
+                continue  # most neighbours end here, so the corner test comes after
+            if k >= 4 and (state[node + dc] == 3 or state[node + dr * w] == 3):
+                continue  # no cutting past a blocked corner
             g[nb] = ng
             parent[nb] = node
             if nb == goal:
@@ -178,32 +206,34 @@ def _search(
             buckets[slot, top] = nb
             counts[slot] = top + 1
             live += 1
-    out[0] = 1.0 if best < np.inf else 0.0
-    out[1] = best
-    out[2] = expansions
+    ctl[_BUCKET] = b
+    ctl[_LIVE] = live
+    ctl[_EXPANSIONS] += done
+    best_out[0] = best
+    if status == BUDGET:
+        return buckets, BUDGET, np.empty((0, 2), dtype=np.int64)
     if best == np.inf:
-        return buckets, np.empty((0, 2), dtype=np.int64)
-    return buckets, _trace(parent, goal, w)
+        return buckets, EXHAUSTED, np.empty((0, 2), dtype=np.int64)
+    ctl[_LIVE] = 0  # finished: a later run returns at once
+    return buckets, FOUND, _trace(parent, goal, w)
 
 
 class Workspace:
-    """The per-cell arrays of searches over one grid size, reused call after call."""
+    """The per-cell arrays of searches over one grid size (reusable by one search at a time)."""
 
     def __init__(self, height: int, width: int) -> None:
         n = (height + 2) * (width + 2)
         if n >= 2**31:
             raise ValueError(f"grid of {height} x {width} cells is too large for int32 cell ids")
         self.shape = (height, width)
-        # the search state and the costs inside a border of blocked cells, the inside rewritten
-        # per search (flat, rows of width + 2)
-        self.state = np.full(n, 3, dtype=np.uint8)
-        self.cost = np.zeros(n, dtype=np.uint8)
-        # np.empty does not fault pages in: a search touches only the cells it reaches.
+        # np.empty does not fault pages in: a search writes the state and touches only the cells
+        # it reaches in the others.
+        self.state = np.empty(n, dtype=np.uint8)
+        self.cost = np.empty(n, dtype=np.uint8)
         self.g = np.empty(n)
         self.parent = np.empty(n, dtype=np.int32)
         self.buckets = np.empty((0, 0), dtype=np.int32)
         self.counts = np.empty(0, dtype=np.int64)
-        self.out = np.empty(3)
 
     def ring(self, n_buckets: int) -> None:
         """Size the open list for ``n_buckets`` buckets (kept between searches)."""
@@ -216,7 +246,7 @@ _local = threading.local()
 
 
 def workspace_for(height: int, width: int) -> Workspace:
-    """This thread's workspace for (height, width) grids (the last size used is kept)."""
+    """This thread's shared workspace for (height, width) grids (the last size used is kept)."""
     ws = getattr(_local, "ws", None)
     if ws is None or ws.shape != (height, width):
         ws = Workspace(height, width)
@@ -231,6 +261,110 @@ def _n_buckets(max_step: float, heuristic_weight: float, width_f: float) -> int:
     return 1 << max(4, math.ceil(math.log2(span)))
 
 
+_NO_COST = np.zeros((1, 1), dtype=np.uint8)
+
+
+class BucketSearch:
+    """One search ``start -> goal`` over a (H, W) grid; ``run(budget)`` until FOUND or EXHAUSTED.
+
+    ``passable`` (H, W) bool; ``cost`` (H, W) 0..255 cell costs (weighted only when
+    ``cost_travel_multiplier`` is not 0); start/goal as (row, col). The start is expanded even if
+    it is not passable (a robot may start in inflation); the goal must be passable (or be the
+    start). Without ``workspace`` the search gets arrays of its own."""
+
+    def __init__(
+        self,
+        passable: np.ndarray,
+        cost: np.ndarray | None,
+        start: tuple[int, int],
+        goal: tuple[int, int],
+        *,
+        heuristic_weight: float = 1.0,
+        cost_travel_multiplier: float = 0.0,
+        width: float = BUCKET_WIDTH,
+        workspace: Workspace | None = None,
+    ) -> None:
+        h, w = passable.shape
+        sr, sc = int(start[0]), int(start[1])
+        gr, gc = int(goal[0]), int(goal[1])
+        if not (0 <= sr < h and 0 <= sc < w and 0 <= gr < h and 0 <= gc < w):
+            raise ValueError(f"start {start} or goal {goal} is outside the {h} x {w} grid")
+        if not (0.0 <= heuristic_weight < math.inf and 0.0 < width < math.inf):
+            raise ValueError(
+                f"heuristic_weight must be finite >= 0 and width > 0: {heuristic_weight}, {width}"
+            )
+        self.use_cost = cost is not None and cost_travel_multiplier != 0.0
+        if self.use_cost and cost.shape != passable.shape:
+            raise ValueError(f"cost {cost.shape} and passable {passable.shape} differ in shape")
+        self.passable = passable
+        self.cost = cost if self.use_cost else _NO_COST
+        self.cost_factor = float(cost_travel_multiplier) / 252.0
+        self.heuristic_weight = float(heuristic_weight)
+        self.width = float(width)
+        self.shape = (h, w)
+        self.start = (sr + 1) * (w + 2) + sc + 1
+        self.goal = (gr + 1) * (w + 2) + gc + 1
+        self.ws = workspace if workspace is not None else Workspace(h, w)
+        max_step = SQRT2 * (1.0 + self.cost_factor * 255.0) if self.use_cost else SQRT2
+        self.ws.ring(_n_buckets(max_step, self.heuristic_weight, self.width))
+        self.ctl = np.zeros(4, dtype=np.int64)
+        self.best = np.empty(1)
+        self.path: np.ndarray | None = None
+
+    def run(self, budget: int) -> int:
+        """Expand at most ``budget`` cells; returns FOUND, EXHAUSTED or BUDGET."""
+        ws = self.ws
+        ws.buckets, status, cells = _search(
+            self.passable,
+            self.cost,
+            self.use_cost,
+            self.cost_factor,
+            self.heuristic_weight,
+            self.start,
+            self.goal,
+            self.width,
+            int(budget),
+            ws.state,
+            ws.cost,
+            ws.g,
+            ws.parent,
+            ws.buckets,
+            ws.counts,
+            self.ctl,
+            self.best,
+        )
+        if status == FOUND:
+            self.path = cells
+        return int(status)
+
+    @property
+    def expansions(self) -> int:
+        return int(self.ctl[_EXPANSIONS])
+
+    @property
+    def goal_cost(self) -> float:
+        """The goal's cost (inf until a path reached it)."""
+        return float(self.best[0])
+
+    @property
+    def closed(self) -> np.ndarray:
+        """(H, W) bool mask of the cells whose cost is final or that were expanded."""
+        h, w = self.shape
+        return self.ws.state.reshape(h + 2, w + 2)[1:-1, 1:-1] == 2
+
+    def _flat(self, row: int, col: int) -> int:
+        return (row + 1) * (self.shape[1] + 2) + col + 1
+
+    def cells_to(self, row: int, col: int) -> tuple[np.ndarray, np.ndarray]:
+        """(rows, cols) of the path start -> (row, col), which must be closed."""
+        cells = _trace(self.ws.parent, self._flat(row, col), self.shape[1] + 2)
+        return cells[:, 0], cells[:, 1]
+
+    def cost_to(self, row: int, col: int) -> float:
+        """Accumulated step cost from the start to a closed cell."""
+        return float(self.ws.g[self._flat(row, col)])
+
+
 def octile_search(
     passable: np.ndarray,
     start: tuple[int, int],
@@ -241,44 +375,19 @@ def octile_search(
     heuristic_weight: float = 1.0,
     width: float = BUCKET_WIDTH,
 ) -> tuple[float, np.ndarray | None, int]:
-    """Optimal (goal cost, (N, 2) path cells as (row, col) start first, expansions); cost ``inf``
-    and path None when the goal cannot be reached. ``passable`` (H, W) bool; ``cost`` optional
-    (H, W) 0..255 cell costs weighted as in ``grid_search``. The start is expanded even if it is not
-    passable (a robot may start in inflation); the goal must be passable (or be the start)."""
+    """Optimal (goal cost, (N, 2) path cells as (row, col) start first, expansions) in one call,
+    on this thread's reused workspace; cost ``inf`` and path None when the goal is unreachable."""
     h, w = passable.shape
-    sr, sc = int(start[0]), int(start[1])
-    gr, gc = int(goal[0]), int(goal[1])
-    if not (0 <= sr < h and 0 <= sc < w and 0 <= gr < h and 0 <= gc < w):
-        raise ValueError(f"start {start} or goal {goal} is outside the {h} x {w} grid")
-    if not (0.0 <= heuristic_weight < math.inf) or not width > 0.0:
-        raise ValueError(f"heuristic_weight must be finite >= 0 and width > 0: {heuristic_weight}, {width}")
-    use_cost = cost is not None and cost_travel_multiplier != 0.0
-    if use_cost and cost.shape != passable.shape:
-        raise ValueError(f"cost {cost.shape} and passable {passable.shape} differ in shape")
-    cost_factor = float(cost_travel_multiplier) / 252.0
-    ws = workspace_for(h, w)
-    ws.ring(_n_buckets(SQRT2 * (1.0 + cost_factor * 255.0) if use_cost else SQRT2, heuristic_weight, width))
-    pw = w + 2
-    ws.buckets, cells = _search(
+    search = BucketSearch(
         passable,
-        cost if use_cost else _NO_COST,
-        use_cost,
-        cost_factor,
-        float(heuristic_weight),
-        (sr + 1) * pw + sc + 1,
-        (gr + 1) * pw + gc + 1,
-        float(width),
-        ws.state,
-        ws.cost,
-        ws.g,
-        ws.parent,
-        ws.buckets,
-        ws.counts,
-        ws.out,
+        cost,
+        start,
+        goal,
+        heuristic_weight=heuristic_weight,
+        cost_travel_multiplier=cost_travel_multiplier,
+        width=width,
+        workspace=workspace_for(h, w),
     )
-    if not ws.out[0]:
-        return math.inf, None, int(ws.out[2])
-    return float(ws.out[1]), cells, int(ws.out[2])
-
-
-_NO_COST = np.zeros((1, 1), dtype=np.uint8)
+    if search.run(1 << 62) != FOUND:
+        return math.inf, None, search.expansions
+    return search.goal_cost, search.path, search.expansions
