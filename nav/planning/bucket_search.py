@@ -84,9 +84,10 @@ def _fill(
         base = (r + 1) * w
         state[base] = 3
         state[base + w - 1] = 3
-        for c in range(wi):
-            state[base + 1 + c] = 0 if passable[r, c] else 3
-            if use_cost:
+        for c in range(wi):  # branch-free, so the loop vectorizes
+            state[base + 1 + c] = np.uint8(3) - np.uint8(3) * np.uint8(passable[r, c])
+        if use_cost:
+            for c in range(wi):
                 padded_cost[base + 1 + c] = cost[r, c]
 
 
