@@ -12,8 +12,8 @@ from test_planning_reference import reference_costs
 
 from bench.datasets import MOVINGAI
 from bench.peers import load_movingai_map, load_scenarios
-from nav.planning.bucket_search import octile_search, workspace_for
-from nav.planning.grid_search import FOUND, SearchState
+from nav.planning.bucket_search import BucketSearch, octile_search, workspace_for
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SearchState
 from nav.types import LETHAL_OBSTACLE
 
 SQRT2 = math.sqrt(2.0)
@@ -136,3 +136,34 @@ def test_movingai_optimal_lengths(name: str) -> None:
         got, cells, _ = octile_search(passable, start, goal)
         assert got == pytest.approx(optimal, abs=1e-6), (start, goal)
         assert path_cost(cells, passable, np.zeros(passable.shape, np.uint8), 0.0) == pytest.approx(got)
+
+
+def test_resumed_in_slices_gives_the_same_result() -> None:
+    # The planner runs the search in budgets of expansions to check its deadline between them.
+    rng = np.random.default_rng(7)  # a seed whose corners are connected
+    passable = rng.random((200, 200)) >= 0.25
+    passable[0, 0] = passable[-1, -1] = True
+    costs = rng.integers(0, 200, passable.shape).astype(np.uint8)
+    whole = BucketSearch(passable, costs, (0, 0), (199, 199), cost_travel_multiplier=2.0)
+    assert whole.run(1 << 62) == FOUND
+    sliced = BucketSearch(passable, costs, (0, 0), (199, 199), cost_travel_multiplier=2.0)
+    calls = 0
+    while (status := sliced.run(500)) == BUDGET:
+        calls += 1
+    assert status == FOUND and calls > 10
+    assert sliced.goal_cost == whole.goal_cost == sliced.cost_to(199, 199)
+    assert sliced.expansions == whole.expansions
+    assert np.array_equal(sliced.path, whole.path)
+    rows, cols = sliced.cells_to(199, 199)
+    assert np.array_equal(np.column_stack((rows, cols)), whole.path)
+    assert sliced.run(500) == FOUND  # finished: another call changes nothing
+
+
+def test_exhausted_search_closes_every_reachable_cell() -> None:
+    passable = np.ones((20, 20), dtype=bool)
+    passable[10, :] = False  # the goal's half is cut off
+    search = BucketSearch(passable, None, (0, 0), (15, 5))
+    assert search.run(1 << 62) == EXHAUSTED
+    assert math.isinf(search.goal_cost)
+    assert np.array_equal(search.closed, np.arange(20)[:, None] < 10 * np.ones((1, 20), dtype=bool))
+    assert search.cost_to(9, 9) == pytest.approx(9 * SQRT2)
