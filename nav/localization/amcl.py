@@ -36,6 +36,7 @@ from nav.localization.kld import count_bins, kld_sample_count
 from nav.localization.motion_models import MotionAlphas, sample_motion
 from nav.localization.options import AmclOptions
 from nav.localization.resampling import low_variance_resample
+from nav.raycast import RayCaster
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
 # Nav2 pf_update_converged: converged when every particle is within this distance of the mean.
@@ -91,7 +92,9 @@ class Amcl:
         seed: int | None = None,
         cast_rays: sm.RayCaster | None = None,
     ) -> None:
-        """``cast_rays`` (``nav.raycast.cast_rays`` by default) is needed only by the beam model."""
+        """``cast_rays``: the beam model's ray caster; by default a compiled pass that casts and
+        scores every beam at once (``beam_kernel``), equal to ``beam_model_weights`` with
+        ``nav.raycast.cast_rays``."""
         self.options = options
         self.grid = grid
         self._rng = np.random.default_rng(seed)
@@ -101,10 +104,13 @@ class Amcl:
         self._field = sm.LikelihoodField(grid, options.laser_likelihood_max_dist, options.sigma_hit)
         self._occupied = grid.occupied_mask()
         self._cast_rays = cast_rays
+        # the beam model's own caster, built once per map: its skip table is the likelihood
+        # field's distances (capped at laser_likelihood_max_dist, still a valid lower bound)
+        self._caster: RayCaster | None = None
         if options.laser_model_type == "beam" and cast_rays is None:
-            from nav.raycast import cast_rays as default_caster
-
-            self._cast_rays = default_caster
+            self._caster = RayCaster(
+                self._occupied, grid.geometry, clearance=self._field.distance[1:-1, 1:-1]
+            )
         free_r, free_c = np.nonzero(grid.free_mask())
         self._free_xy = grid.geometry.cell_to_world(free_r, free_c)  # free cell centres, map frame
         self._particles = np.zeros((0, 3))
@@ -288,6 +294,8 @@ class Amcl:
         if o.laser_model_type == "likelihood_field_prob":
             w = self._weights if particles is self._particles else None
             return sm.likelihood_field_prob_weights(self._field, particles, laser_pose, beams, o, w)
+        if self._caster is not None:
+            return sm.beam_model_weights_compiled(self._caster, particles, laser_pose, beams, o)
         assert self._cast_rays is not None
         return sm.beam_model_weights(
             self._occupied, self.grid, self._cast_rays, particles, laser_pose, beams, o

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
+from nav import raycast
+from nav.localization.beam_kernel import beam_log_weights
 from nav.localization.options import AmclOptions
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
@@ -246,6 +248,19 @@ def beam_model_weights(
     is_max = obs >= beams.range_max
     pz = pz + np.where(is_max, options.z_max, options.z_rand / beams.range_max)
     return np.log1p(np.sum(pz * pz * pz, axis=1))
+
+
+def beam_model_weights_compiled(
+    caster: raycast.RayCaster, particles: np.ndarray, laser_pose: Pose2D, beams: Beams, options: AmclOptions
+) -> np.ndarray:
+    """``beam_model_weights`` in one compiled pass over particles x beams (``beam_kernel``) on a
+    caster built once per map; the same log weights."""
+    if beams.ranges.size == 0:
+        return np.zeros(particles.shape[0])
+    lx, ly, lt = _laser_poses(particles, laser_pose)
+    return beam_log_weights(
+        caster, np.column_stack((lx, ly)), lt, beams.bearings, beams.ranges, beams.range_max, options
+    )
 
 
 def scan_fit(field: LikelihoodField, pose: Pose2D, laser_pose: Pose2D, beams: Beams) -> float:
