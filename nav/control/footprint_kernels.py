@@ -84,34 +84,36 @@ def _pose_bin(theta: float, theta0: float, scale: float, bins: int) -> int:
 
 @njit(cache=True, nogil=True)
 def _lethal_poses(
-    costs: np.ndarray,
+    levels: np.ndarray,
     near: np.ndarray,
     poses: np.ndarray,
     origin: np.ndarray,
-    offsets: np.ndarray,
-    round_robot: bool,
+    spans: np.ndarray,
+    counts: np.ndarray,
 ) -> np.ndarray:
     """(K, T) whether the footprint touches a lethal cell at each of the (K, T, 3) poses (any
     layout: the trajectories' future poses are a strided view): poses off the ``near`` mask are
-    clear; the rest gather their heading bin's offsets up to the first lethal one (round robots:
-    ``near`` is the answer)."""
-    h, w = costs.shape
+    clear; the rest query their heading bin's row runs in the row-maximum table ``levels`` (see
+    ``_span_max``) up to the first lethal one."""
+    _, h, w = levels.shape
     x0, y0, theta0, inv = origin[0], origin[1], origin[2], origin[3]
-    bins = offsets.shape[0]
+    bins = spans.shape[0]
     scale = bins / (2.0 * math.pi)
-    p = offsets.shape[1]
     out = np.zeros(poses.shape[:2], dtype=np.bool_)
     for k in range(poses.shape[0]):
         for i in range(poses.shape[1]):
             r, c = _pose_cell(poses[k, i, 0], poses[k, i, 1], x0, y0, inv, h, w)
             if not near[r, c]:
                 continue
-            if round_robot:
-                out[k, i] = True
-                continue
-            off = offsets[_pose_bin(poses[k, i, 2], theta0, scale, bins)]
-            for j in range(p):
-                if costs[r + off[j, 0], c + off[j, 1]] >= 254:
+            b = _pose_bin(poses[k, i, 2], theta0, scale, bins)
+            for s in range(counts[b]):
+                rr = min(max(r + spans[b, s, 0], 0), h - 1)
+                lo = min(max(c + spans[b, s, 1], 0), w - 1)
+                hi = min(max(c + spans[b, s, 2], 0), w - 1)
+                j = 0
+                while (2 << j) <= hi - lo + 1:
+                    j += 1
+                if max(levels[j, rr, lo], levels[j, rr, hi - (1 << j) + 1]) >= 254:
                     out[k, i] = True
                     break
     return out
@@ -155,31 +157,6 @@ def _lethal_round_poses(
     return out
 
 
-@njit(cache=True, nogil=True)
-def _max_cost_poses(
-    costs: np.ndarray, poses: np.ndarray, origin: np.ndarray, flat_offsets: np.ndarray
-) -> np.ndarray:
-    """(N,) max cost under the binned footprint at each of the (N, 3) poses; ``flat_offsets``
-    (B, P) are the offsets as flat indices into ``costs`` (row * width + col): one add per cell
-    and a branch-free maximum."""
-    h, w = costs.shape
-    flat = costs.ravel()
-    x0, y0, theta0, inv = origin[0], origin[1], origin[2], origin[3]
-    bins = flat_offsets.shape[0]
-    scale = bins / (2.0 * math.pi)
-    n, p = poses.shape[0], flat_offsets.shape[1]
-    out = np.zeros(n, dtype=np.uint8)
-    for i in range(n):
-        r, c = _pose_cell(poses[i, 0], poses[i, 1], x0, y0, inv, h, w)
-        off = flat_offsets[_pose_bin(poses[i, 2], theta0, scale, bins)]
-        base = r * w + c
-        best = flat[base + off[0]]
-        for j in range(1, p):
-            best = max(best, flat[base + off[j]])
-        out[i] = best
-    return out
-
-
 @lru_cache(maxsize=32)
 def _disc(resolution: float, reach: float) -> np.ndarray:
     """(N, 2) integer cell offsets within ``reach`` metres, by the same float test as
@@ -190,3 +167,55 @@ def _disc(resolution: float, reach: float) -> np.ndarray:
     dr, dc = np.meshgrid(idx, idx, indexing="ij")
     keep = np.sqrt((dr * dr + dc * dc).astype(np.float64)) * resolution <= reach
     return np.column_stack((dr[keep], dc[keep])).astype(np.int64)
+
+
+@njit(cache=True, nogil=True)
+def _row_max_levels(costs: np.ndarray, levels: int) -> np.ndarray:
+    """(levels, H, W) sparse table of row-wise maxima: ``out[j, r, c]`` = max of ``costs[r, c :
+    c + 2^j]`` (clipped at the row's end). Any run of a row then has its maximum in two lookups."""
+    h, w = costs.shape
+    out = np.empty((levels, h, w), dtype=np.uint8)
+    out[0] = costs
+    for j in range(1, levels):
+        half = 1 << (j - 1)
+        for r in range(h):
+            for c in range(w):
+                a = out[j - 1, r, c]
+                if c + half < w:
+                    b = out[j - 1, r, c + half]
+                    if b > a:
+                        a = b
+                out[j, r, c] = a
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _span_max(
+    levels: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    bins: np.ndarray,
+    spans: np.ndarray,
+    counts: np.ndarray,
+) -> np.ndarray:
+    """(N,) max cost under the footprint at cells (rows, cols) with heading bins ``bins``: the
+    footprint of a bin is ``counts[bin]`` row runs ``spans[bin, s] = (row offset, first col offset,
+    last col offset)``, each run's maximum two lookups in the sparse table. Cells off the window
+    read its nearest edge cell (``ndimage`` mode "nearest")."""
+    _, h, w = levels.shape
+    out = np.zeros(rows.shape[0], dtype=np.uint8)
+    for i in range(rows.shape[0]):
+        b = bins[i]
+        best = 0
+        for s in range(counts[b]):
+            rr = min(max(rows[i] + spans[b, s, 0], 0), h - 1)
+            lo = min(max(cols[i] + spans[b, s, 1], 0), w - 1)
+            hi = min(max(cols[i] + spans[b, s, 2], 0), w - 1)
+            j = 0
+            while (2 << j) <= hi - lo + 1:
+                j += 1
+            v = max(levels[j, rr, lo], levels[j, rr, hi - (1 << j) + 1])
+            if v > best:
+                best = v
+        out[i] = best
+    return out
