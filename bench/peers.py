@@ -20,7 +20,9 @@ exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., 
 from __future__ import annotations
 
 import importlib
+import math
 import statistics
+import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -29,10 +31,21 @@ from types import ModuleType
 
 import numpy as np
 
+from bench import pythonrobotics_dwa as prd
+from bench.amcl import LASER_POSE, load_map, synth_scans
+from bench.amcl import WILLOW as WILLOW_01
 from bench.core import Benchmark, Figure
 from bench.datasets import MOVINGAI, ROS_MAPS
 from bench.planning import _component_corners, _real_map_costmap
+from nav.control import DwaController, DwaOptions
+from nav.costmap.inflation import InflationOptions, inflate
+from nav.localization import Amcl, AmclOptions
 from nav.planning.bucket_search import octile_search
+from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, OccupancyGrid, Pose2D, Twist2D
+from nav.types import Path as NavPath
+from robot.clock import VirtualClock
+from robot.profiles import load_profile
+from robot.sim import SimDriver, World
 
 ROUNDS = 7
 WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
@@ -71,6 +84,7 @@ def optional_import(name: str) -> ModuleType | None:
 # skipped (see optional_import).
 PYASTAR2D = optional_import("pyastar2d")
 REPORTED_PEERS = {name: optional_import(name) for name in ("karto_scanmatcher", "amcl", "irsim")}
+MPIMG = optional_import("matplotlib.image")  # installed with ir-sim; writes its image map
 
 
 def alternating_medians(
@@ -185,6 +199,243 @@ def _astar_rows(pyastar2d: ModuleType | None) -> list[Row]:
     return rows
 
 
+# --- AMCL, DWA and simulator rows ------------------------------------------------------------------
+
+AMCL_PARTICLES = 2000
+DWA_SIZE_ROUNDS = 101
+AMCL_TRUTH = np.array([[14.0, 33.0, 0.3], [14.1, 33.0, 0.3]])  # a room of Willow Garage (0.1 m map)
+
+
+def _single(fn: Callable[[], object]) -> float:
+    """Median wall ms of ``ROUNDS`` calls after one warm-up (a row whose peer is missing)."""
+    fn()
+    times = []
+    for _ in range(ROUNDS):
+        t = time.perf_counter()
+        fn()
+        times.append(time.perf_counter() - t)
+    return statistics.median(times) * 1e3
+
+
+def _amcl_rows(amcl: ModuleType | None) -> list[Row]:
+    """One full filter update (motion, measurement, resampling) of 2000 particles x 60 beams on
+    Willow Garage (0.1 m cells) per side, both with Nav2's default model parameters. The PyPI
+    ``amcl`` binary binds Nav2's BeamModel only, so the likelihood-field row has no peer here."""
+
+    if not WILLOW_01.exists():
+        return [Row("AMCL update", None, "Nav2 AMCL", None, f"{WILLOW_01} missing")]
+    grid = load_map()
+    scans = synth_scans(grid, AMCL_TRUTH, np.random.default_rng(1))
+    rows: list[Row] = []
+    for model in ("likelihood_field", "beam"):
+        # pf_err tiny keeps KLD at max_particles: every update runs on 2000 particles
+        o = AmclOptions(laser_model_type=model, update_min_d=0.0, update_min_a=0.0, pf_err=1e-4)
+        ours_filter = Amcl(o, grid, seed=0)
+        ours_filter.set_initial_pose(Pose2D.from_array(AMCL_TRUTH[0]), np.diag([0.1, 0.1, 0.05]))
+        step = iter(range(1 << 30))
+
+        def ours(f: Amcl = ours_filter, it=step) -> None:
+            i = next(it)
+            f.update(Pose2D(0.001 * i, 0.0, 0.0), scans[i % 2], LASER_POSE)
+
+        kernel = f"AMCL update, {model.replace('_', ' ')}, {AMCL_PARTICLES} particles x 60 beams"
+        if model != "beam" or amcl is None:
+            peer = "Nav2 AMCL (PyPI amcl binds the beam model only)" if amcl else "Nav2 AMCL (not installed)"
+            rows.append(Row(kernel, _single(ours), peer, None))
+            continue
+        theirs = _nav2_amcl_update(amcl, grid, scans, o)
+        a, b = alternating_medians(ours, theirs)
+        rows.append(Row(kernel, a, "Nav2 AMCL via PyPI amcl", b))
+    return rows
+
+
+def _nav2_amcl_update(
+    amcl: ModuleType, grid: OccupancyGrid, scans: list, o: AmclOptions
+) -> Callable[[], None]:
+    """A closure running one update of the PyPI ``amcl`` filter (Nav2's C++) per call, on the same
+    map (occupied 100, unknown -1), scans ([range, bearing] pairs, no-returns at range_max), laser
+    mount and parameters as navdeck's side; its map origin is the grid's corner, as checked by
+    localizing at the truth."""
+
+    g = grid.geometry
+    data = np.where(grid.occupied_mask(), 100, np.where(grid.data < 0, -1, 0)).astype(int)
+    occ = amcl.create_occupancy_grid_from_list(data.tolist(), g.resolution, g.origin.x, g.origin.y)
+    laser = amcl.LaserParameters(
+        o.z_hit, o.z_short, o.z_max, o.z_rand, o.sigma_hit, o.lambda_short, 0.0, o.laser_max_beams
+    )
+    motion = amcl.MotionParameters(o.alpha1, o.alpha2, o.alpha3, o.alpha4, o.alpha5)
+    f = amcl.AMCL(
+        AMCL_PARTICLES,
+        AMCL_PARTICLES,
+        o.recovery_alpha_slow,
+        o.recovery_alpha_fast,
+        motion,
+        laser,
+        "differential",
+    )
+    f.set_map(occ)
+    f.set_laser_pose(amcl.Vector3D(LASER_POSE.x, LASER_POSE.y, LASER_POSE.theta))
+    x, y, th = AMCL_TRUTH[0]
+    f.set_initial_pose(amcl.Vector3D(x, y, th), amcl.create_diagonal_covariance(0.1, 0.1, 0.05))
+    peer_scans = []
+    for sc in scans:
+        bearings = sc.angle_min + sc.angle_increment * np.arange(sc.ranges.size)
+        r = np.where(np.isfinite(sc.ranges), sc.ranges, sc.range_max)
+        peer_scans.append(
+            amcl.create_laser_scan_from_list(np.column_stack((r, bearings)).tolist(), sc.range_max)
+        )
+    step = iter(range(1 << 30))
+
+    def theirs() -> None:
+        i = next(step)
+        f.update(peer_scans[i % 2], amcl.Vector3D(0.001 * i, 0.0, 0.0))
+
+    return theirs
+
+
+def _dwa_rows() -> list[Row]:
+    """One DWA cycle in PythonRobotics' demo world (its 15 point obstacles, start at rest, goal
+    (10, 10)) with its limits, window (dt 0.1 s) and 3 s horizon. navdeck: the obstacles as lethal
+    cells of a 0.05 m costmap with Nav2 inflation, a straight path to the goal, DWB critics,
+    20 x 20 samples; PythonRobotics: its own 4 x 80 samples and objective (bench.pythonrobotics_dwa,
+    written from the published algorithm: PythonRobotics is not on PyPI). The same world with a
+    0.1 m robot has no peer: it shows how navdeck's cycle grows with the robot's size."""
+
+    cfg = prd.Config()
+    ours_1m, ours_small = _navdeck_dwa_cycle(1.0), _navdeck_dwa_cycle(0.1)
+    theirs = lambda: prd.dwa_control(prd.START, cfg, prd.GOAL, prd.OBSTACLES)  # noqa: E731
+    a, b = alternating_medians(ours_1m, theirs)
+    # the size ratio from its own pairing, many rounds: both cycles are ~1 ms, so one busy spell
+    # of the shared machine would otherwise decide it
+    big, small = alternating_medians(ours_1m, ours_small, rounds=DWA_SIZE_ROUNDS)
+    return [
+        Row(
+            "DWA cycle, PythonRobotics' world and 1.0 m robot",
+            a,
+            "PythonRobotics DWA (from its algorithm)",
+            b,
+        ),
+        Row(
+            "DWA cycle, same world, 0.1 m robot",
+            small,
+            "",
+            None,
+            f"1.0 m robot {big:.3g} ms in the same pairing: {big / small:.2f}x (target <= 2)",
+        ),
+    ]
+
+
+def _navdeck_dwa_cycle(radius: float) -> Callable[[], None]:
+
+    cfg, res, size = prd.Config(), 0.05, 400
+    geo = GridGeometry(res, size, size, Pose2D(-3.0, -3.0, 0.0))
+    base = np.zeros((size, size), dtype=np.uint8)
+    r, c = geo.world_to_cell(prd.OBSTACLES)
+    base[r, c] = LETHAL_OBSTACLE
+    inflation = InflationOptions(inflation_radius=radius + 0.5, cost_scaling_factor=3.0)
+    costmap = Costmap(geo, inflate(base, res, radius, inflation))
+    options = DwaOptions(
+        robot_radius=radius,
+        min_vel_x=cfg.min_speed,
+        max_vel_x=cfg.max_speed,
+        max_speed_xy=cfg.max_speed,
+        max_vel_theta=cfg.max_yaw_rate,
+        acc_lim_x=cfg.max_accel,
+        decel_lim_x=-cfg.max_accel,
+        acc_lim_theta=cfg.max_delta_yaw_rate,
+        decel_lim_theta=-cfg.max_delta_yaw_rate,
+        controller_frequency=1.0 / cfg.dt,
+        sim_time=cfg.predict_time,
+        discretize_by_time=True,
+        time_granularity=cfg.dt,
+        forward_prune_distance=3.0,
+    )
+    ctl = DwaController(options)
+    n = 200
+    line = np.linspace(0.0, 1.0, n)
+    ctl.set_path(NavPath(np.column_stack((prd.GOAL[0] * line, prd.GOAL[1] * line, np.full(n, math.pi / 4)))))
+    pose = Pose2D(prd.START[0], prd.START[1], prd.START[2])
+
+    def cycle() -> None:
+        ctl.compute(pose, Twist2D(), costmap)
+
+    return cycle
+
+
+def _sim_rows(irsim: ModuleType | None) -> list[Row]:
+    """One simulator step of one lidar period (a diff-drive robot driving, a 360-beam 6 m lidar
+    scan) in navdeck's office world, against ir-sim on the same occupancy grid (an image map of the
+    same size) with the same lidar. ir-sim and irsim-x both install ``irsim``: the row names the
+    one that imported."""
+
+    profile = load_profile("skid4")
+    world = World.stock("office")
+    _ = world.raycaster, world.clearance_map
+    clock = VirtualClock()
+    driver = SimDriver(world, profile, clock, seed=0)
+    period = 1.0 / profile.lidar.rate_hz
+
+    def ours() -> None:
+        driver.command(Twist2D(0.2, 0.0, 0.3))
+        clock.advance(period)
+        driver.read()
+
+    kernel = "simulator step, 360-beam lidar, office"
+    if irsim is None or MPIMG is None:
+        return [Row(kernel, _single(ours), "ir-sim / irsim-x (not installed)", None)]
+    name = "irsim-x" if _irsim_is_x(irsim) else "ir-sim"
+    theirs = _irsim_step(irsim, world, period, profile.lidar.range_max)
+    a, b = alternating_medians(ours, theirs)
+    return [Row(kernel, a, name, b)]
+
+
+def _irsim_is_x(irsim: ModuleType) -> bool:
+    """Whether the installed ``irsim`` is irsim-x's: only irsim-x ships compiled modules."""
+    return any(Path(irsim.__file__).parent.rglob("*.so"))
+
+
+def _irsim_step(irsim: ModuleType, world: World, period: float, range_max: float) -> Callable[[], None]:
+    """ir-sim's env.step() closure on ``world``'s occupancy (an image in a temporary folder)."""
+
+    folder = Path(tempfile.mkdtemp(prefix="navdeck-irsim-"))
+    occ = world.occupied
+    MPIMG.imsave(
+        folder / "office.png",
+        np.flipud(np.where(occ, 0, 255)).astype(np.uint8),
+        cmap="gray",
+        vmin=0,
+        vmax=255,
+    )
+    g = world.geometry
+    start = world.start_pose
+    (folder / "office.yaml").write_text(
+        f"""world:
+  height: {g.height * g.resolution}
+  width: {g.width * g.resolution}
+  step_time: {period}
+  offset: [{g.origin.x}, {g.origin.y}]
+  obstacle_map: {folder / "office.png"}
+  collision_mode: stop
+robot:
+  - kinematics: {{name: diff}}
+    shape: {{name: circle, radius: 0.15}}
+    state: [{start.x}, {start.y}, {start.theta}]
+    sensors:
+      - name: lidar2d
+        range_min: 0.15
+        range_max: {range_max}
+        angle_range: 6.283185307179586
+        number: 360
+"""
+    )
+    env = irsim.make(str(folder / "office.yaml"), display=False, disable_all_plot=True)
+
+    def theirs() -> None:
+        env.step(np.array([[0.2], [0.3]]))
+
+    return theirs
+
+
 # --- report --------------------------------------------------------------------------------------
 
 
@@ -195,13 +446,16 @@ def _ms(v: float | None) -> str:
 def markdown_table(rows: list[Row]) -> str:
     out = ["| kernel | navdeck | peer | ratio navdeck/peer | note |", "| --- | --- | --- | --- | --- |"]
     for r in rows:
-        ratio = "" if r.ratio is None else f"{r.ratio:.2f}"
+        ratio = "" if r.ratio is None else f"{r.ratio:.2f}" if r.ratio >= 0.1 else f"{r.ratio:.2g}"
         out.append(f"| {r.kernel} | {_ms(r.navdeck_ms)} | {r.peer} {_ms(r.peer_ms)} | {ratio} | {r.note} |")
     return "\n".join(out)
 
 
 def bench_peers() -> list[Figure]:
     rows = _astar_rows(PYASTAR2D)
+    rows += _amcl_rows(REPORTED_PEERS["amcl"])
+    rows += _dwa_rows()
+    rows += _sim_rows(REPORTED_PEERS["irsim"])
     for name, module in REPORTED_PEERS.items():
         if module is None:
             print(f"peer {name}: not installed")
