@@ -5,7 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
+from bench import pythonrobotics_dwa as prd
 from bench.peers import (
     Row,
     load_movingai_map,
@@ -55,3 +57,25 @@ def test_product_never_imports_a_peer() -> None:
         for f in (root / pkg).rglob("*.py"):
             text = f.read_text()
             assert not any(p in text for p in peers), f
+
+
+def test_pythonrobotics_dwa_reference_follows_its_published_rules() -> None:
+    """The DWA peer written from PythonRobotics' algorithm: its dynamic window from rest (4 speeds
+    x 80 turn rates), 3 s rollouts at 0.1 s (the start and 30 steps), a collision inside the robot
+    radius costs inf, and the chosen command leads towards the goal without touching an obstacle."""
+
+    cfg = prd.Config()
+    dw = prd.dynamic_window(prd.START, cfg)
+    assert dw == pytest.approx((-0.02, 0.02, -cfg.max_delta_yaw_rate * 0.1, cfg.max_delta_yaw_rate * 0.1))
+    traj = prd.predict_trajectory(prd.START, 0.5, 0.1, cfg)
+    assert traj.shape == (31, 5) and traj[-1, 3] == 0.5  # 30 steps: 0.1 summed 30 times exceeds 3.0
+    assert prd.obstacle_cost(traj, np.array([[traj[5, 0], traj[5, 1] + 0.5]]), cfg) == float("inf")
+    far = np.array([[traj[5, 0], traj[5, 1] + 2.0]])
+    nearest = np.hypot(traj[:, 0] - far[0, 0], traj[:, 1] - far[0, 1]).min()
+    assert nearest > cfg.robot_radius and prd.obstacle_cost(traj, far, cfg) == pytest.approx(1.0 / nearest)
+    x = prd.START.copy()
+    for _ in range(40):  # 4 s of its demo loop
+        (v, w), best = prd.dwa_control(x, cfg, prd.GOAL, prd.OBSTACLES)
+        assert np.isfinite(prd.obstacle_cost(best, prd.OBSTACLES, cfg))
+        x = prd.motion(x, v, w, cfg.dt)
+    assert np.hypot(*(x[:2] - prd.GOAL)) < np.hypot(*(prd.START[:2] - prd.GOAL))
