@@ -64,6 +64,7 @@ class Row:
     peer: str
     peer_ms: float | None
     note: str = ""
+    extra: tuple[Figure, ...] = ()  # figures of the row beyond the two times and their ratio
 
     @property
     def ratio(self) -> float | None:
@@ -321,6 +322,7 @@ def _dwa_rows() -> list[Row]:
             "",
             None,
             f"1.0 m robot {big:.3g} ms in the same pairing: {big / small:.2f}x (target <= 2)",
+            (Figure("DWA cycle 1.0 m / 0.1 m robot", big / small, "x", "<= 2", big / small <= 2.0),),
         ),
     ]
 
@@ -468,6 +470,7 @@ def bench_peers() -> list[Figure]:
             figs.append(Figure(f"{r.kernel}: {r.peer}", r.peer_ms, "ms"))
         if r.ratio is not None:
             figs.append(Figure(f"{r.kernel}: ratio", r.ratio, "x", "<= 1", r.ratio <= 1.0))
+        figs.extend(r.extra)
     return figs
 
 
