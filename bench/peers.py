@@ -45,7 +45,7 @@ from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, OccupancyGrid, Pos
 from nav.types import Path as NavPath
 from robot.clock import VirtualClock
 from robot.profiles import load_profile
-from robot.sim import SimDriver, World
+from robot.sim import SimDriver, SimOptions, World
 
 ROUNDS = 7
 WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
@@ -204,6 +204,7 @@ def _astar_rows(pyastar2d: ModuleType | None) -> list[Row]:
 
 AMCL_PARTICLES = 2000
 DWA_SIZE_ROUNDS = 101
+SIM_ROUNDS = 31  # a step is ~1 ms: more rounds than ROUNDS against the shared machine's noise
 AMCL_TRUTH = np.array([[14.0, 33.0, 0.3], [14.1, 33.0, 0.3]])  # a room of Willow Garage (0.1 m map)
 
 
@@ -365,17 +366,19 @@ def _navdeck_dwa_cycle(radius: float) -> Callable[[], None]:
 
 
 def _sim_rows(irsim: ModuleType | None) -> list[Row]:
-    """One simulator step of one lidar period (a diff-drive robot driving, a 360-beam 6 m lidar
-    scan) in navdeck's office world, against ir-sim on the same occupancy grid (an image map of the
-    same size) with the same lidar. ir-sim and irsim-x both install ``irsim``: the row names the
-    one that imported."""
+    """One simulator step of one lidar period (one motion update of a diff-drive robot driving,
+    one 360-beam 6 m lidar scan) in navdeck's office world, against ir-sim on the same occupancy
+    grid (an image map of the same size) with the same lidar. ir-sim and irsim-x both install
+    ``irsim``: the row names the one that imported."""
 
     profile = load_profile("skid4")
     world = World.stock("office")
     _ = world.raycaster, world.clearance_map
     clock = VirtualClock()
-    driver = SimDriver(world, profile, clock, seed=0)
     period = 1.0 / profile.lidar.rate_hz
+    # one physics substep per lidar period, like ir-sim's step (navdeck runs 100 Hz substeps)
+    options = SimOptions(physics_rate_hz=profile.lidar.rate_hz)
+    driver = SimDriver(world, profile, clock, seed=0, options=options)
 
     def ours() -> None:
         driver.command(Twist2D(0.2, 0.0, 0.3))
@@ -387,13 +390,14 @@ def _sim_rows(irsim: ModuleType | None) -> list[Row]:
         return [Row(kernel, _single(ours), "ir-sim / irsim-x (not installed)", None)]
     name = "irsim-x" if _irsim_is_x(irsim) else "ir-sim"
     theirs = _irsim_step(irsim, world, period, profile.lidar.range_max)
-    a, b = alternating_medians(ours, theirs)
+    a, b = alternating_medians(ours, theirs, rounds=SIM_ROUNDS)
     return [Row(kernel, a, name, b)]
 
 
 def _irsim_is_x(irsim: ModuleType) -> bool:
-    """Whether the installed ``irsim`` is irsim-x's: only irsim-x ships compiled modules."""
-    return any(Path(irsim.__file__).parent.rglob("*.so"))
+    """Whether the installed ``irsim`` is irsim-x's (its version module reads irsim-x's metadata;
+    its compiled core is a separate top-level package)."""
+    return "irsim-x" in Path(irsim.__file__).with_name("version.py").read_text()
 
 
 def _irsim_step(irsim: ModuleType, world: World, period: float, range_max: float) -> Callable[[], None]:
