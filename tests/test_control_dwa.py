@@ -711,7 +711,7 @@ def test_escape_depth_keeps_the_same_trajectories_as_all_pairs_in_dense_clutter(
 def test_footprint_costs_by_row_runs_equal_every_cell(radius: float) -> None:
     """The footprint's maximum cost, queried as row runs in a row-maximum table (a 1 m round robot
     is 41 runs per pose instead of 1300 cells; it used to be a ``maximum_filter`` over the whole
-    window), equals the gather over every footprint cell, for discs and for a rotated-bin polygon
+    window), equals a numpy gather over every footprint cell, for discs and for a rotated-bin polygon
     whose rows are not one run (an L shape), and so does the lethal test along trajectories."""
     rng = np.random.default_rng(int(radius * 100))
     ell = np.array(
@@ -721,6 +721,8 @@ def test_footprint_costs_by_row_runs_equal_every_cell(radius: float) -> None:
         FootprintModel.build(np.asarray(circle_footprint(radius)), RES, 1, round_robot=True),
         FootprintModel.build(ell, RES, 16, round_robot=False),
     )
+    disc = models[0]
+    assert disc.spans[1][0] == len(np.unique(disc.offsets[0][:, 0]))  # one run per row of a disc
     for trial in range(6):
         h, w = rng.integers(60, 90, 2)
         costs = rng.integers(0, 250, (h, w)).astype(np.uint8)
@@ -732,9 +734,8 @@ def test_footprint_costs_by_row_runs_equal_every_cell(radius: float) -> None:
         for model in models:
             window = CostWindow.around(cm, poses, model.circumscribed, unknown_is_lethal=False)
             rows, cols = window.cells(poses)
-            full = window._gather(rows.ravel(), cols.ravel(), poses[..., 2].ravel(), model).reshape(
-                rows.shape
-            )
+            off = model.offsets[window._bins(poses[..., 2], model)]  # (20, 5, P, 2): numpy reference
+            full = window.costs[rows[..., None] + off[..., 0], cols[..., None] + off[..., 1]].max(axis=-1)
             assert np.array_equal(window.footprint_costs(poses, model), full)
             if not model.round:
                 assert np.array_equal(window.footprint_lethal(poses, model), full >= 254)
