@@ -96,6 +96,7 @@ def _lethal_poses(
     clear; the rest query their heading bin's row runs in the row-maximum table ``levels`` (see
     ``_span_max``) up to the first lethal one."""
     _, h, w = levels.shape
+    lg = _floor_log2(w)
     x0, y0, theta0, inv = origin[0], origin[1], origin[2], origin[3]
     bins = spans.shape[0]
     scale = bins / (2.0 * math.pi)
@@ -110,9 +111,7 @@ def _lethal_poses(
                 rr = min(max(r + spans[b, s, 0], 0), h - 1)
                 lo = min(max(c + spans[b, s, 1], 0), w - 1)
                 hi = min(max(c + spans[b, s, 2], 0), w - 1)
-                j = 0
-                while (2 << j) <= hi - lo + 1:
-                    j += 1
+                j = lg[hi - lo + 1]
                 if max(levels[j, rr, lo], levels[j, rr, hi - (1 << j) + 1]) >= 254:
                     out[k, i] = True
                     break
@@ -190,6 +189,15 @@ def _row_max_levels(costs: np.ndarray, levels: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def _floor_log2(n: int) -> np.ndarray:
+    """(n + 1,) floor(log2(x)) for x = 1..n (entry 0 unused): a run's sparse-table level."""
+    lg = np.zeros(n + 1, dtype=np.int64)
+    for x in range(2, n + 1):
+        lg[x] = lg[x >> 1] + 1
+    return lg
+
+
+@njit(cache=True, nogil=True)
 def _span_max(
     levels: np.ndarray,
     rows: np.ndarray,
@@ -203,6 +211,7 @@ def _span_max(
     last col offset)``, each run's maximum two lookups in the sparse table. Cells off the window
     read its nearest edge cell (``ndimage`` mode "nearest")."""
     _, h, w = levels.shape
+    lg = _floor_log2(w)
     out = np.zeros(rows.shape[0], dtype=np.uint8)
     for i in range(rows.shape[0]):
         b = bins[i]
@@ -211,9 +220,7 @@ def _span_max(
             rr = min(max(rows[i] + spans[b, s, 0], 0), h - 1)
             lo = min(max(cols[i] + spans[b, s, 1], 0), w - 1)
             hi = min(max(cols[i] + spans[b, s, 2], 0), w - 1)
-            j = 0
-            while (2 << j) <= hi - lo + 1:
-                j += 1
+            j = lg[hi - lo + 1]
             v = max(levels[j, rr, lo], levels[j, rr, hi - (1 << j) + 1])
             if v > best:
                 best = v
