@@ -20,6 +20,7 @@ import math
 
 import numpy as np
 from numba import njit
+from scipy.ndimage import distance_transform_edt
 
 from nav.types import GridGeometry
 
@@ -166,21 +167,19 @@ class RayCaster:
         pad = np.zeros((self._stride, self._stride), dtype=bool)
         pad[1 : h + 1, 1 : w + 1] = occupied
         self._flat = pad.ravel()
-        self._clearance: np.ndarray | None = None  # cells
-        if isinstance(clearance, np.ndarray):
-            self._clearance = np.asarray(clearance, dtype=np.float64) / geometry.resolution
-        elif clearance:
-            from scipy.ndimage import distance_transform_edt
-
-            self._clearance = (
-                distance_transform_edt(~occupied) if occupied.any() else np.full(occupied.shape, np.inf)
-            )
         # march_ray's walk table: OCCUPIED, or the whole cells no ray can hit within from anywhere
         # in the cell (the transform measures centre to centre, hence minus a cell diagonal);
-        # 0 (no jump) without a clearance and on the free border
+        # 0 (no jump) without a clearance and on the free border. Only this byte table is kept.
         walk = np.zeros((self._stride, self._stride), dtype=np.uint8)
-        if self._clearance is not None:
-            cells = np.floor(np.maximum(self._clearance - math.sqrt(2.0) - 1e-6, 0.0))
+        cells_clear: np.ndarray | None = None
+        if isinstance(clearance, np.ndarray):
+            cells_clear = np.asarray(clearance, dtype=np.float64) / geometry.resolution
+        elif clearance:
+            cells_clear = (
+                distance_transform_edt(~occupied) if occupied.any() else np.full(occupied.shape, np.inf)
+            )
+        if cells_clear is not None:
+            cells = np.floor(np.maximum(cells_clear - math.sqrt(2.0) - 1e-6, 0.0))
             walk[1 : h + 1, 1 : w + 1] = np.minimum(cells, OCCUPIED - 1)
         walk[pad] = OCCUPIED
         self._walk = walk.ravel()
@@ -245,17 +244,12 @@ class RayCaster:
         return out.reshape(p, b)
 
     def _start_distance(self, local: np.ndarray) -> np.ndarray:
-        """Per origin (cell units): a distance below which no occupied cell can be hit. The
-        transform measures centre to centre; the origin and the obstacle may each sit anywhere in
-        their cells, hence minus sqrt(2). Off-grid origins get 0."""
-        out = np.zeros(local.shape[0])
-        if self._clearance is None:
-            return out
-        h, w = self._clearance.shape
-        cols, rows = np.floor(local[:, 0]).astype(np.intp), np.floor(local[:, 1]).astype(np.intp)
-        inside = (rows >= 0) & (rows < h) & (cols >= 0) & (cols < w)
-        out[inside] = np.maximum(self._clearance[rows[inside], cols[inside]] - math.sqrt(2.0) - 1e-6, 0.0)
-        return np.minimum(out, 1e9)
+        """Per origin (cell units): a distance below which no occupied cell can be hit, the walk
+        table's value at the origin's cell (0 in an occupied cell and off the grid)."""
+        cols = np.clip(np.floor(local[:, 0]) + 1.0, 0.0, float(self._n + 1)).astype(np.intp)
+        rows = np.clip(np.floor(local[:, 1]) + 1.0, 0.0, float(self._n + 1)).astype(np.intp)
+        v = self._walk[rows * self._stride + cols].astype(np.float64)
+        return np.where(v == OCCUPIED, 0.0, v)
 
 
 def cast_rays(
