@@ -492,8 +492,9 @@ def test_round_robot_collision_test_equals_the_exact_centre_distance() -> None:
     """Random costmaps, poses and grid rotations: a round footprint collides exactly when a lethal
     cell's centre lies strictly within the radius of the pose (TEB's ``centre_collisions``)."""
     rng = np.random.default_rng(11)
-    model = FootprintModel.build(np.asarray(circle_footprint(0.25)), RES, 1, round_robot=True)
-    for trial in range(16):
+    for trial in range(24):
+        radius = (0.25, 0.8, 0.02)[trial % 3]  # 0.02 m: smaller than half a cell diagonal
+        model = FootprintModel.build(np.asarray(circle_footprint(radius)), RES, 1, round_robot=True)
         h, w = rng.integers(20, 50, 2)
         costs = rng.integers(0, 200, (h, w)).astype(np.uint8)
         costs[rng.random((h, w)) < 0.05] = 254
@@ -505,8 +506,8 @@ def test_round_robot_collision_test_equals_the_exact_centre_distance() -> None:
         rr, cc = np.nonzero(window.costs >= 254)
         centres = window.geometry.cell_to_world(rr, cc)
         d = np.hypot(poses[..., 0, None] - centres[:, 0], poses[..., 1, None] - centres[:, 1]).min(axis=-1)
-        assert np.array_equal(window.footprint_lethal(poses, model), d < 0.25)
-        assert np.array_equal(window.footprint_lethal(poses[:, 1:], model), d[:, 1:] < 0.25)
+        assert np.array_equal(window.footprint_lethal(poses, model), d < radius)
+        assert np.array_equal(window.footprint_lethal(poses[:, 1:], model), d[:, 1:] < radius)
 
 
 def test_footprint_step_spaces_poses_by_the_footprint_sweep() -> None:

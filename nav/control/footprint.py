@@ -31,8 +31,9 @@ from nav.control.footprint_kernels import (
     _crop,
     _disc,
     _lethal_poses,
-    _lethal_round_poses,
+    _lethal_round_dt,
     _near_lethal,
+    _ring,
     _row_max_levels,
     _span_max,
     _xy_bounds,
@@ -239,7 +240,15 @@ class CostWindow:
 
     def lethal_distance(self) -> np.ndarray:
         """(H, W) Euclidean distance (m) from each cell centre to the nearest lethal cell centre."""
+        return self._lethal_dist
+
+    @cached_property
+    def _lethal_dist(self) -> np.ndarray:
         return ndimage.distance_transform_edt(self.costs < LETHAL_OBSTACLE) * self.geometry.resolution
+
+    @cached_property
+    def _has_lethal(self) -> bool:
+        return bool((self.costs >= LETHAL_OBSTACLE).any())
 
     def near_lethal(self, reach: float) -> np.ndarray:
         """(H, W) whether a lethal cell centre lies within ``reach`` m of each cell centre: the
@@ -262,17 +271,20 @@ class CostWindow:
         then grinds the post's corner). Polygons: the rest are gathered, up to their first
         lethal cell."""
         res = self.geometry.resolution
-        reach = model.circumscribed + 0.75 * res
-        near = self.near_lethal(reach)
-        if model.round:  # exact pose against the lethal cells' centres (see _lethal_round_poses)
+        if model.round:  # exact pose against the lethal cells' centres (see _lethal_round_dt)
             p3, origin = _poses_3d(poses), self._origin
             if origin is None:  # rotated grid: the poses in the grid's frame, where it is axis-aligned
                 xy = self.geometry.origin.inverse().transform_points(p3[..., :2].reshape(-1, 2))
                 p3 = np.concatenate((xy.reshape(*p3.shape[:2], 2), p3[..., 2:3]), axis=-1)
                 origin = np.array([0.0, 0.0, 0.0, 1.0 / res])
-            disc = _disc(res, reach)
-            got = _lethal_round_poses(self.costs, near, p3, origin, disc, res, model.circumscribed)
+            if not self._has_lethal:
+                return np.zeros(poses.shape[:-1], dtype=bool)
+            ring, ring_r = _ring(res, model.circumscribed + 0.7072 * res)
+            dist = self._lethal_dist
+            got = _lethal_round_dt(self.costs, dist, p3, origin, ring, ring_r, res, model.circumscribed)
             return got.reshape(poses.shape[:-1])
+        reach = model.circumscribed + 0.75 * res
+        near = self.near_lethal(reach)
         if self._origin is not None:
             spans, counts, levels = model.spans
             table = self.row_max_levels(levels)

@@ -118,34 +118,56 @@ def _lethal_poses(
     return out
 
 
+@lru_cache(maxsize=32)
+def _disc(resolution: float, reach: float) -> np.ndarray:
+    """(N, 2) integer cell offsets within ``reach`` metres, by the same float test as
+    ``edt * resolution <= reach`` (so the mask equals the distance-transform test). Cached: one
+    robot asks for the same one or two every cycle."""
+    r = math.floor(reach / resolution) + 1
+    idx = np.arange(-r, r + 1)
+    dr, dc = np.meshgrid(idx, idx, indexing="ij")
+    keep = np.sqrt((dr * dr + dc * dc).astype(np.float64)) * resolution <= reach
+    return np.column_stack((dr[keep], dc[keep])).astype(np.int64)
+
+
 @njit(cache=True, nogil=True)
-def _lethal_round_poses(
+def _lethal_round_dt(
     costs: np.ndarray,
-    near: np.ndarray,
+    dist: np.ndarray,
     poses: np.ndarray,
     origin: np.ndarray,
-    disc: np.ndarray,
+    ring: np.ndarray,
+    ring_r: np.ndarray,
     resolution: float,
     radius: float,
 ) -> np.ndarray:
     """(K, T) whether a lethal cell's centre lies strictly within ``radius`` of each of the (K, T, 3)
     poses' exact position (a round robot; a lethal cell is a point obstacle at its centre, as TEB's
-    ``centre_collisions``). ``near`` must hold the cells within ``radius`` + 0.75 cell of a lethal
-    centre (a pose lies at most half a cell diagonal, 0.71 cell, from its cell's centre) and
-    ``disc`` the cell offsets within that reach: poses off the mask are clear, the rest test the
-    lethal cells of their disc by exact distance."""
+    ``centre_collisions``), from the window's distance transform (``dist``: m from each cell
+    centre to the nearest lethal cell centre): a pose lies within half a cell diagonal ``h`` of its
+    cell's centre, so ``dist - h >= radius`` is clear and ``dist + h < radius`` collides. Only poses
+    in between test lethal cells exactly, and only those whose centre distance from the cell's
+    centre lies in [dist, radius + h) (``ring``: cell offsets sorted by their distance ``ring_r``,
+    m): an annulus about 1.4 cells wide, so the cost grows with the radius, not the disc's area."""
     h, w = costs.shape
     x0, y0, inv, res = origin[0], origin[1], origin[3], resolution
+    half = 0.7072 * res  # > sqrt(2) / 2 cell: bounds the pose's offset from its cell's centre
     r2 = radius * radius
     out = np.zeros(poses.shape[:2], dtype=np.bool_)
     for k in range(poses.shape[0]):
         for i in range(poses.shape[1]):
             x, y = poses[k, i, 0], poses[k, i, 1]
             r, c = _pose_cell(x, y, x0, y0, inv, h, w)
-            if not near[r, c]:
+            d = dist[r, c]
+            if d - half >= radius:
                 continue
-            for j in range(disc.shape[0]):
-                rr, cc = r + disc[j, 0], c + disc[j, 1]
+            if d + half < radius:
+                out[k, i] = True
+                continue
+            j = np.searchsorted(ring_r, d - 1e-9)
+            while j < ring_r.shape[0] and ring_r[j] < radius + half:
+                rr, cc = r + ring[j, 0], c + ring[j, 1]
+                j += 1
                 if rr < 0 or rr >= h or cc < 0 or cc >= w or costs[rr, cc] < 254:
                     continue
                 dx = x0 + (cc + 0.5) * res - x
@@ -157,15 +179,12 @@ def _lethal_round_poses(
 
 
 @lru_cache(maxsize=32)
-def _disc(resolution: float, reach: float) -> np.ndarray:
-    """(N, 2) integer cell offsets within ``reach`` metres, by the same float test as
-    ``edt * resolution <= reach`` (so the mask equals the distance-transform test). Cached: one
-    robot asks for the same one or two every cycle."""
-    r = math.floor(reach / resolution) + 1
-    idx = np.arange(-r, r + 1)
-    dr, dc = np.meshgrid(idx, idx, indexing="ij")
-    keep = np.sqrt((dr * dr + dc * dc).astype(np.float64)) * resolution <= reach
-    return np.column_stack((dr[keep], dc[keep])).astype(np.int64)
+def _ring(resolution: float, reach: float) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) cell offsets within ``reach`` m sorted by their distance, and those distances (m)."""
+    disc = _disc(resolution, reach)
+    r = np.sqrt((disc * disc).sum(axis=1).astype(np.float64)) * resolution
+    order = np.argsort(r, kind="stable")
+    return np.ascontiguousarray(disc[order]), r[order]
 
 
 @njit(cache=True, nogil=True)
