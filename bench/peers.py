@@ -310,6 +310,9 @@ def _dwa_rows() -> list[Row]:
     # the size ratio from its own pairing, many rounds: both cycles are ~1 ms, so one busy spell
     # of the shared machine would otherwise decide it
     big, small = alternating_medians(ours_1m, ours_small, rounds=DWA_SIZE_ROUNDS)
+    hall_big, hall_small = alternating_medians(
+        _navdeck_dwa_cycle(1.0, corridor=True), _navdeck_dwa_cycle(0.1, corridor=True), rounds=DWA_SIZE_ROUNDS
+    )
     return [
         Row(
             "DWA cycle, PythonRobotics' world and 1.0 m robot",
@@ -325,15 +328,38 @@ def _dwa_rows() -> list[Row]:
             f"1.0 m robot {big:.3g} ms in the same pairing: {big / small:.2f}x (target <= 2)",
             (Figure("DWA cycle 1.0 m / 0.1 m robot", big / small, "x", "<= 2", big / small <= 2.0),),
         ),
+        Row(
+            "DWA cycle, 2.5 m corridor along the start heading, 1.0 m robot",
+            hall_big,
+            "",
+            None,
+            f"0.1 m robot {hall_small:.3g} ms, same pairing: {hall_big / hall_small:.2f}x (target <= 2)",
+            (
+                Figure(
+                    "DWA cycle in a corridor, 1.0 m / 0.1 m robot",
+                    hall_big / hall_small,
+                    "x",
+                    "<= 2",
+                    hall_big / hall_small <= 2.0,
+                ),
+            ),
+        ),
     ]
 
 
-def _navdeck_dwa_cycle(radius: float) -> Callable[[], None]:
-
+def _navdeck_dwa_cycle(radius: float, corridor: bool = False) -> Callable[[], None]:
+    """One DWA cycle from PythonRobotics' start in its world, or (``corridor``) between two walls
+    2.5 m apart along the start's heading, where most poses of a 1 m robot are near a wall."""
     cfg, res, size = prd.Config(), 0.05, 400
     geo = GridGeometry(res, size, size, Pose2D(-3.0, -3.0, 0.0))
     base = np.zeros((size, size), dtype=np.uint8)
-    r, c = geo.world_to_cell(prd.OBSTACLES)
+    points = prd.OBSTACLES
+    if corridor:
+        s = np.arange(-3.0, 17.0, res / 2)
+        c, si = math.cos(prd.START[2]), math.sin(prd.START[2])
+        points = np.vstack([np.column_stack((s * c - off * si, s * si + off * c)) for off in (-1.25, 1.25)])
+        points = points[(points >= -3.0).all(axis=1) & (points < 17.0).all(axis=1)]
+    r, c = geo.world_to_cell(points)
     base[r, c] = LETHAL_OBSTACLE
     inflation = InflationOptions(inflation_radius=radius + 0.5, cost_scaling_factor=3.0)
     costmap = Costmap(geo, inflate(base, res, radius, inflation))
