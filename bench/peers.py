@@ -19,6 +19,7 @@ exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., 
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import math
 import statistics
@@ -37,7 +38,7 @@ from bench.amcl import WILLOW as WILLOW_01
 from bench.core import Benchmark, Figure
 from bench.datasets import MOVINGAI, ROS_MAPS
 from bench.planning import _component_corners, _real_map_costmap
-from nav.control import DwaController, DwaOptions
+from nav.control import DwaController, DwaOptions, NoValidControl
 from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
 from nav.planning.bucket_search import octile_search
@@ -348,8 +349,9 @@ def _dwa_rows() -> list[Row]:
 
 
 def _navdeck_dwa_cycle(radius: float, corridor: bool = False) -> Callable[[], None]:
-    """One DWA cycle from PythonRobotics' start in its world, or (``corridor``) between two walls
-    2.5 m apart along the start's heading, where most poses of a 1 m robot are near a wall."""
+    """One DWA cycle from PythonRobotics' start (at rest) in its world, or (``corridor``) between
+    two walls 2.5 m apart along the start's heading, cruising at 0.5 m/s 0.1 m off the centre line,
+    where many poses of a 1 m robot are near a wall."""
     cfg, res, size = prd.Config(), 0.05, 400
     geo = GridGeometry(res, size, size, Pose2D(-3.0, -3.0, 0.0))
     base = np.zeros((size, size), dtype=np.uint8)
@@ -384,9 +386,14 @@ def _navdeck_dwa_cycle(radius: float, corridor: bool = False) -> Callable[[], No
     line = np.linspace(0.0, 1.0, n)
     ctl.set_path(NavPath(np.column_stack((prd.GOAL[0] * line, prd.GOAL[1] * line, np.full(n, math.pi / 4)))))
     pose = Pose2D(prd.START[0], prd.START[1], prd.START[2])
+    velocity = Twist2D()
+    if corridor:  # cruising 0.1 m off the centre line: the 3 s arcs sweep along both walls
+        pose = Pose2D(pose.x - 0.1 * math.sin(pose.theta), pose.y + 0.1 * math.cos(pose.theta), pose.theta)
+        velocity = Twist2D(0.5, 0.0, 0.0)
 
     def cycle() -> None:
-        ctl.compute(pose, Twist2D(), costmap)
+        with contextlib.suppress(NoValidControl):  # a cycle rejecting every sample did the work too
+            ctl.compute(pose, velocity, costmap)
 
     return cycle
 
