@@ -8,6 +8,7 @@ from dataclasses import replace
 
 import numpy as np
 import pytest
+from scipy import ndimage
 from test_control_world import (
     RES,
     SKID_FOOTPRINT,
@@ -30,6 +31,7 @@ from nav.control import (
 from nav.control.critics import Oscillation, PreferForward
 from nav.control.footprint import CostWindow, FootprintModel
 from nav.control.footprint import _inside_polygon as inside_polygon
+from nav.control.footprint_kernels import _lethal_sq_distance
 from nav.control.geometry import polyline_distance, project_onto_polyline, project_poses
 from nav.control.trajectory import sample_twists, simulate_arcs, time_steps, window_1d
 from nav.costmap.footprint import circle_footprint
@@ -740,3 +742,18 @@ def test_footprint_costs_by_row_runs_equal_every_cell(radius: float) -> None:
             assert np.array_equal(window.footprint_costs(poses, model), full)
             if not model.round:
                 assert np.array_equal(window.footprint_lethal(poses, model), full >= 254)
+
+
+def test_compiled_distance_transform_equals_scipys() -> None:
+    """The window's distance to the nearest lethal cell centre (a compiled two-pass exact
+    transform, behind the round robots' collision test and the clearance) equals scipy's EDT."""
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        h, w = rng.integers(1, 60, 2)
+        costs = rng.integers(0, 256, (h, w)).astype(np.uint8)
+        costs[rng.random((h, w)) < rng.uniform(0.0, 0.2)] = 254
+        if not (costs >= 254).any():
+            assert np.isinf(_lethal_sq_distance(costs)).all()
+            continue
+        want = ndimage.distance_transform_edt(costs < 254)
+        np.testing.assert_allclose(np.sqrt(_lethal_sq_distance(costs)), want, rtol=0, atol=1e-12)

@@ -32,6 +32,7 @@ from nav.control.footprint_kernels import (
     _disc,
     _lethal_poses,
     _lethal_round_dt,
+    _lethal_sq_distance,
     _near_lethal,
     _ring,
     _row_max_levels,
@@ -244,7 +245,9 @@ class CostWindow:
 
     @cached_property
     def _lethal_dist(self) -> np.ndarray:
-        return ndimage.distance_transform_edt(self.costs < LETHAL_OBSTACLE) * self.geometry.resolution
+        if not self._has_lethal:  # scipy's answer for a mask without a lethal cell, kept as it was
+            return ndimage.distance_transform_edt(self.costs < LETHAL_OBSTACLE) * self.geometry.resolution
+        return np.sqrt(_lethal_sq_distance(self.costs)) * self.geometry.resolution
 
     @cached_property
     def _has_lethal(self) -> bool:

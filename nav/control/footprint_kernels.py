@@ -131,6 +131,69 @@ def _disc(resolution: float, reach: float) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True)
+def _lower_envelope(f: np.ndarray, out: np.ndarray, v: np.ndarray, z: np.ndarray) -> None:
+    """Felzenszwalb & Huttenlocher's 1-D squared distance transform: ``out[q] = min_p (q - p)^2 +
+    f[p]`` (``f`` = inf where there is no site), with work arrays ``v`` (n,) and ``z`` (n + 1,)."""
+    n = f.shape[0]
+    k = -1
+    for q in range(n):
+        if f[q] == np.inf:
+            continue
+        if k < 0:
+            k = 0
+            v[0] = q
+            z[0] = -np.inf
+            z[1] = np.inf
+            continue
+        s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * (q - v[k]))
+        while s <= z[k]:
+            k -= 1
+            s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * (q - v[k]))
+        k += 1
+        v[k] = q
+        z[k] = s
+        z[k + 1] = np.inf
+    if k < 0:
+        out[:] = np.inf
+        return
+    k = 0
+    for q in range(n):
+        while z[k + 1] < q:
+            k += 1
+        d = q - v[k]
+        out[q] = d * d + f[v[k]]
+
+
+@njit(cache=True, nogil=True)
+def _lethal_sq_distance(costs: np.ndarray) -> np.ndarray:
+    """(H, W) squared distance (cells^2) from each cell centre to the nearest lethal cell centre,
+    exact (two 1-D passes of ``_lower_envelope``); inf without a lethal cell. The same values as
+    ``scipy.ndimage.distance_transform_edt(costs < 254) ** 2``, a fraction of its cost on one
+    small window per cycle."""
+    h, w = costs.shape
+    n = max(h, w)
+    v = np.empty(n, dtype=np.int64)
+    z = np.empty(n + 1)
+    col = np.empty(h)
+    tmp = np.empty(n)
+    out = np.empty((h, w))
+    for c in range(w):
+        for r in range(h):
+            col[r] = 0.0 if costs[r, c] >= 254 else np.inf
+        _lower_envelope(col, tmp[:h], v, z)
+        for r in range(h):
+            out[r, c] = tmp[r]
+    row = np.empty(w)
+    for r in range(h):
+        for c in range(w):
+            row[c] = out[r, c]
+        _lower_envelope(row, tmp[:w], v, z)
+        for c in range(w):
+            out[r, c] = tmp[c]
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _lethal_round_dt(
     costs: np.ndarray,
     dist: np.ndarray,
