@@ -14,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from nav.grid import LogOddsGrid
+from nav.slam import kernels
 
 
 def _kernel(sigma: float, resolution: float) -> np.ndarray:
@@ -41,28 +42,32 @@ class LikelihoodField:
     def from_grid(cls, grid: LogOddsGrid, sigma: float = 0.05, levels: int = 0) -> LikelihoodField:
         """Field of a log-odds grid; cells with ``l > 0`` count as occupied; ``sigma`` in metres.
 
-        The Gaussian is truncated at 3 sigma, so ``F`` is a max of small kernels: built by a few
-        shifted maxima here, and updated by splatting only the newly occupied cells afterwards
+        The Gaussian is truncated at 3 sigma, so ``F`` is a max of small kernels, one splatted
+        around each occupied cell (compiled, :func:`nav.slam.kernels.splat`; the numpy reference is
+        :func:`field_reference`), and updated by splatting only the newly occupied cells afterwards
         (:meth:`splat`)."""
-        occ = grid.logodds > 0.0
+        rows, cols = np.nonzero(grid.logodds > 0.0)
         f = np.zeros(grid.shape, dtype=np.float32)
-        rows = np.flatnonzero(occ.any(axis=1))
-        if rows.size:
-            cols = np.flatnonzero(occ.any(axis=0))
-            k = _kernel(sigma, grid.resolution)
-            rad = int(np.abs(k[:, :2]).max())
-            # work on the bounding box of the occupied cells (plus the kernel radius) only
-            r0, r1 = max(rows[0] - rad, 0), min(rows[-1] + rad + 1, occ.shape[0])
-            c0, c1 = max(cols[0] - rad, 0), min(cols[-1] + rad + 1, occ.shape[1])
-            sub = f[r0:r1, c0:c1]
-            occf = occ[r0:r1, c0:c1].astype(np.float32)
-            h, w = occf.shape
-            for dyf, dxf, wt in k:
-                dy, dx = int(dyf), int(dxf)
-                ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
-                xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
-                np.maximum(sub[yd, xd], np.float32(wt) * occf[ys, xs], out=sub[yd, xd])
+        kernels.splat(f, rows, cols, _kernel(sigma, grid.resolution))
         obj = cls(f, grid.origin, grid.resolution, levels)
+        obj.sigma = sigma
+        return obj
+
+    @classmethod
+    def from_points(
+        cls, points: np.ndarray, resolution: float, sigma: float = 0.05, margin: float = 0.5, levels: int = 0
+    ) -> LikelihoodField:
+        """Field of the cells hit by (N, 2) ``points`` (scan-to-scan matching: the reference
+        scan's returns in its own frame), on a grid covering them plus ``margin`` (m); no free
+        space is traced (the field only needs the occupied cells)."""
+        if points.shape[0] == 0:
+            raise ValueError("no points to build a likelihood field from")
+        lo = np.floor((points.min(axis=0) - margin) / resolution) * resolution
+        shape = np.floor((points.max(axis=0) + margin - lo) / resolution).astype(np.int64) + 1
+        cells = np.floor((points - lo) / resolution).astype(np.int64)
+        f = np.zeros((int(shape[1]), int(shape[0])), dtype=np.float32)
+        kernels.splat(f, cells[:, 1].copy(), cells[:, 0].copy(), _kernel(sigma, resolution))
+        obj = cls(f, lo, resolution, levels)
         obj.sigma = sigma
         return obj
 
@@ -70,14 +75,8 @@ class LikelihoodField:
         """Raise ``F`` around newly occupied flat ``cells`` (same grid shape); drops pooled levels."""
         if cells.size == 0:
             return
-        h, w = self.field.shape
-        r0, c0 = np.divmod(cells, w)
-        k = _kernel(self.sigma, self.resolution)
-        r = r0[:, None] + k[:, 0][None, :].astype(np.int64)
-        c = c0[:, None] + k[:, 1][None, :].astype(np.int64)
-        wt = np.broadcast_to(k[:, 2][None, :], r.shape)
-        ok = (r >= 0) & (r < h) & (c >= 0) & (c < w)
-        np.maximum.at(self.field.reshape(-1), (r * w + c)[ok], wt[ok].astype(self.field.dtype))
+        rows, cols = np.divmod(cells, self.field.shape[1])
+        kernels.splat(self.field, rows, cols, _kernel(self.sigma, self.resolution))
         self.pooled = [self.field]
 
     def ensure_levels(self, levels: int) -> None:
@@ -123,3 +122,17 @@ class LikelihoodField:
         gx = np.where(ok, (1 - fy) * (v01 - v00) + fy * (v11 - v10), 0.0) / self.resolution
         gy = np.where(ok, bot - top, 0.0) / self.resolution
         return val, np.column_stack((gx, gy))
+
+
+def field_reference(occupied: np.ndarray, sigma: float, resolution: float) -> np.ndarray:
+    """Pure-numpy reference of the compiled splat (tests compare the two): ``F`` of a boolean
+    occupancy array as the max of shifted, weighted copies of it, one per kernel offset."""
+    f = np.zeros(occupied.shape, dtype=np.float32)
+    occf = occupied.astype(np.float32)
+    h, w = occf.shape
+    for dyf, dxf, wt in _kernel(sigma, resolution):
+        dy, dx = int(dyf), int(dxf)
+        ys, yd = (slice(0, h - dy), slice(dy, h)) if dy >= 0 else (slice(-dy, h), slice(0, h + dy))
+        xs, xd = (slice(0, w - dx), slice(dx, w)) if dx >= 0 else (slice(-dx, w), slice(0, w + dx))
+        np.maximum(f[yd, xd], np.float32(wt) * occf[ys, xs], out=f[yd, xd])
+    return f

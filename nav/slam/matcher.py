@@ -17,6 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from nav.slam import kernels
 from nav.slam.field import LikelihoodField
 from nav.types import Pose2D, wrap_angle
 
@@ -61,6 +62,15 @@ def _rotations(pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
     return np.stack((c * x - s * y, s * x + c * y), axis=-1)
 
 
+def score_candidates_reference(
+    field: LikelihoodField, level: int, rows0: np.ndarray, cols0: np.ndarray, cand: np.ndarray, step: int
+) -> np.ndarray:
+    """Pure-numpy reference of :func:`nav.slam.kernels.score_candidates` (tests compare the two)."""
+    r = rows0[cand[:, 0]] + (cand[:, 1] * step)[:, None]
+    c = cols0[cand[:, 0]] + (cand[:, 2] * step)[:, None]
+    return field.lookup(level, r, c).sum(axis=1) / rows0.shape[1]
+
+
 def correlative_search(
     field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow
 ) -> tuple[Pose2D, float]:
@@ -93,7 +103,6 @@ def correlative_search_runner_up(
     blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
     a_idx, by, bx = np.meshgrid(np.arange(len(thetas)), blocks, blocks, indexing="ij")
     cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))  # (C, 3) at level `top`
-    n = pts.shape[0]
     for level in range(top, -1, -1):
         s = 1 << level
         if level < top:  # split every kept candidate into its 4 children
@@ -103,9 +112,7 @@ def correlative_search_runner_up(
             lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
-        r = rows0[cand[:, 0]] + (cand[:, 1] * s)[:, None]
-        c = cols0[cand[:, 0]] + (cand[:, 2] * s)[:, None]
-        score = field.lookup(level, r, c).sum(axis=1) / n
+        score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
             cand = cand[keep]
@@ -128,7 +135,35 @@ def refine_pose(
     prior: Pose2D,
     options: RefineOptions = RefineOptions(),
 ) -> tuple[Pose2D, float]:
-    """Gauss-Newton refinement of ``initial``; returns the pose and its mean field score."""
+    """Gauss-Newton refinement of ``initial``; returns the pose and its mean field score
+    (compiled: :func:`nav.slam.kernels.gauss_newton`; :func:`refine_pose_reference` in numpy)."""
+    if pts.shape[0] == 0:
+        raise ScanMatchError("no points to match")
+    x, score = kernels.gauss_newton(
+        field.field,
+        float(field.origin[0]),
+        float(field.origin[1]),
+        field.resolution,
+        np.ascontiguousarray(pts, dtype=np.float64),
+        initial.as_array().astype(np.float64),
+        prior.as_array().astype(np.float64),
+        options.occupied_space_weight,
+        options.translation_weight,
+        options.rotation_weight,
+        options.max_iterations,
+        options.tolerance,
+    )
+    return Pose2D(float(x[0]), float(x[1]), float(x[2])), float(score)
+
+
+def refine_pose_reference(
+    field: LikelihoodField,
+    pts: np.ndarray,
+    initial: Pose2D,
+    prior: Pose2D,
+    options: RefineOptions = RefineOptions(),
+) -> tuple[Pose2D, float]:
+    """Pure-numpy reference of :func:`refine_pose` (tests compare the two)."""
     if pts.shape[0] == 0:
         raise ScanMatchError("no points to match")
     x = initial.as_array().astype(float)

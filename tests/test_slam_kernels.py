@@ -1,0 +1,102 @@
+"""The scan matcher's compiled kernels (nav/slam/kernels.py) give what their numpy references give."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from nav.grid import LogOddsGrid, LogOddsOptions
+from nav.slam import kernels
+from nav.slam.field import LikelihoodField, field_reference
+from nav.slam.matcher import (
+    RefineOptions,
+    SearchWindow,
+    correlative_search,
+    refine_pose,
+    refine_pose_reference,
+    score_candidates_reference,
+)
+from nav.slam.synthetic import box_world, cast_scan
+from nav.types import Pose2D
+
+TRUTH = Pose2D(3.0, 2.0, 0.4)
+
+
+def _world_grid(seed: int) -> tuple[LogOddsGrid, np.ndarray]:
+    """A log-odds grid of one noisy box-world scan, and another noisy scan of the same place."""
+    grid, res = box_world()
+    rng = np.random.default_rng(seed)
+    g = LogOddsGrid(LogOddsOptions(resolution=0.05))
+    g.insert_scan(Pose2D(), cast_scan(grid, res, TRUTH, 360, noise=0.01, rng=rng).points(), np.zeros((0, 2)))
+    return g, cast_scan(grid, res, TRUTH, 360, noise=0.01, rng=rng).points()
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_compiled_field_equals_the_shifted_maxima_reference(seed: int) -> None:
+    g, _ = _world_grid(seed)
+    field = LikelihoodField.from_grid(g, sigma=0.05)
+    assert np.array_equal(field.field, field_reference(g.logodds > 0, 0.05, g.resolution))
+    # incremental splat of new cells equals a rebuild with them occupied
+    rng = np.random.default_rng(seed)
+    new = rng.choice(g.logodds.size, 40, replace=False)
+    field.splat(new)
+    occ = (g.logodds > 0).reshape(-1).copy()
+    occ[new] = True
+    assert np.array_equal(field.field, field_reference(occ.reshape(g.shape), 0.05, g.resolution))
+
+
+def test_field_from_points_marks_the_cells_hit() -> None:
+    pts = np.array([[0.0, 0.0], [1.02, -0.51], [2.5, 3.0]])
+    field = LikelihoodField.from_points(pts, 0.05, sigma=0.05, margin=0.3)
+    cells = np.floor((pts - field.origin) / 0.05).astype(int)
+    occ = np.zeros(field.field.shape, dtype=bool)
+    occ[cells[:, 1], cells[:, 0]] = True
+    assert np.array_equal(field.field, field_reference(occ, 0.05, 0.05))
+    assert field.field[cells[:, 1], cells[:, 0]].min() == 1.0
+    with pytest.raises(ValueError):
+        LikelihoodField.from_points(np.zeros((0, 2)), 0.05)
+
+
+@pytest.mark.parametrize("level", [0, 1, 2])
+def test_compiled_candidate_scores_equal_the_reference(level: int) -> None:
+    g, pts = _world_grid(3)
+    field = LikelihoodField.from_grid(g, levels=2)
+    rng = np.random.default_rng(level)
+    # points partly off the grid too (those count 0 on both sides)
+    rows0 = rng.integers(-5, g.shape[0] + 5, (21, 150))
+    cols0 = rng.integers(-5, g.shape[1] + 5, (21, 150))
+    cand = np.column_stack((rng.integers(0, 21, 500), rng.integers(-6, 7, 500), rng.integers(-6, 7, 500)))
+    step = 1 << level
+    fast = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, step)
+    ref = score_candidates_reference(field, level, rows0, cols0, cand, step)
+    # the reference sums in float32 (the field's type), the kernel in float64
+    np.testing.assert_allclose(fast, ref, rtol=0, atol=1e-6)
+    assert fast.max() > 0.0
+
+
+@pytest.mark.parametrize(
+    ("offset", "weights"),
+    [((0.06, -0.04, 0.05), (3.0, 10.0)), ((-0.03, 0.05, -0.03), (10.0, 40.0)), ((0.2, 0.1, 0.1), (0.5, 2.0))],
+)
+def test_compiled_refinement_equals_the_reference(offset: tuple[float, float, float], weights: tuple) -> None:
+    g, pts = _world_grid(4)
+    field = LikelihoodField.from_grid(g)
+    opts = RefineOptions(translation_weight=weights[0], rotation_weight=weights[1])
+    start = Pose2D(*offset)
+    prior = Pose2D(offset[0] * 0.5, offset[1] * 0.5, offset[2] * 0.5)
+    fast, fast_score = refine_pose(field, pts, start, prior, opts)
+    ref, ref_score = refine_pose_reference(field, pts, start, prior, opts)
+    assert abs(fast.x - ref.x) < 1e-9 and abs(fast.y - ref.y) < 1e-9 and abs(fast.theta - ref.theta) < 1e-9
+    assert abs(fast_score - ref_score) < 1e-9
+
+
+def test_search_with_the_compiled_scores_finds_the_true_pose() -> None:
+    g, pts = _world_grid(5)
+    field = LikelihoodField.from_grid(g, levels=2)
+    for levels in (0, 2):
+        window = SearchWindow(0.3, math.radians(15), math.radians(0.5), levels=levels)
+        pose, score = correlative_search(field, pts, Pose2D(0.17, -0.12, math.radians(6)), window)
+        assert math.hypot(pose.x, pose.y) < 0.05 and abs(pose.theta) < math.radians(1.0), pose
+        assert score > 0.6
