@@ -5,10 +5,13 @@ ch. 9.2; Moravec & Elfes 1985): every cell keeps ``l = log(p / (1 - p))``; a hit
 ray passing through adds ``l_free``, and ``l`` is clamped so the map can change its mind later
 (Cartographer's ``min/max probability`` play the same role).
 
-Free space is traced by sampling every ray at sub-cell steps all at once (``np.repeat`` over the
-ray lengths), so there is no per-beam Python loop. Each cell is updated at most once per scan
-(per ``group``), like Cartographer's update markers, so a cell crossed by many beams of one scan is
-not over-counted. The grid grows (re-allocates with a margin) when the robot explores past its edge.
+Free space is traced by sampling every ray at sub-cell steps: a compiled kernel
+(:func:`_insert_kernel`) walks the samples ray by ray and touches only the cells they cross; the
+vectorized numpy version (``np.repeat`` over the ray lengths) is kept as
+:meth:`LogOddsGrid.insert_rays_reference`, and the tests check both give the same grid. Each cell is
+updated at most once per scan (per ``group``), like Cartographer's update markers, so a cell
+crossed by many beams of one scan is not over-counted. The grid grows (re-allocates with a margin)
+when the robot explores past its edge.
 """
 
 from __future__ import annotations
@@ -17,6 +20,7 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 
@@ -76,6 +80,88 @@ def trace_rays(origins: np.ndarray, ends: np.ndarray, step: float) -> tuple[np.n
     frac = k / n[ray]
     pts = origins[ray] + d[ray] * frac[:, None]
     return pts, ray
+
+
+@njit(cache=True, nogil=True)
+def _insert_kernel(
+    flat: np.ndarray,
+    seen: np.ndarray,
+    width: int,
+    ox: float,
+    oy: float,
+    res: float,
+    origins: np.ndarray,
+    ends: np.ndarray,
+    hit: np.ndarray,
+    step: float,
+    l_occ: np.float32,
+    l_free: np.float32,
+    l_min: np.float32,
+    l_max: np.float32,
+) -> tuple[np.ndarray, int, np.ndarray]:
+    """:meth:`LogOddsGrid.insert_rays_reference` compiled: the same samples (``trace_rays``), the
+    same once-per-cell update and the same stop rule for return-less rays, but only the cells the
+    rays cross are touched (no pass over the whole grid). Returns (cells that became occupied,
+    count that became free, per miss ray the fraction kept)."""
+    mark = np.zeros(flat.size, dtype=np.int8)
+    touched = np.empty(64, dtype=np.int64)
+    nt = 0
+    m = ends.shape[0]
+    for i in range(m):  # this scan's hits first: a miss ray stops at them too
+        if hit[i]:
+            c = math.floor((ends[i, 0] - ox) / res)
+            r = math.floor((ends[i, 1] - oy) / res)
+            idx = r * width + c
+            if mark[idx] == 0:
+                if nt == touched.size:
+                    touched = np.concatenate((touched, np.empty(nt, dtype=np.int64)))
+                touched[nt] = idx
+                nt += 1
+            mark[idx] = 2
+    n_miss = 0
+    for i in range(m):
+        if not hit[i]:
+            n_miss += 1
+    reach = np.ones(n_miss, dtype=np.float64)
+    j = 0
+    for i in range(m):
+        x0, y0 = origins[i, 0], origins[i, 1]
+        dx, dy = ends[i, 0] - x0, ends[i, 1] - y0
+        n = max(math.ceil(math.hypot(dx, dy) / step), 1)
+        stop = n
+        for k in range(n):
+            f = k / n
+            c = math.floor((x0 + dx * f - ox) / res)
+            r = math.floor((y0 + dy * f - oy) / res)
+            idx = r * width + c
+            if not hit[i] and (mark[idx] == 2 or flat[idx] > 0.0):
+                stop = k
+                break
+            if mark[idx] == 0:
+                if nt == touched.size:
+                    touched = np.concatenate((touched, np.empty(nt, dtype=np.int64)))
+                touched[nt] = idx
+                nt += 1
+                mark[idx] = 1
+        if not hit[i]:
+            reach[j] = stop / n
+            j += 1
+    occupied = np.empty(nt, dtype=np.int64)
+    n_occ = 0
+    n_free = 0
+    for t in range(nt):
+        idx = touched[t]
+        before = flat[idx] > 0.0
+        v = flat[idx] + (l_occ if mark[idx] == 2 else l_free)
+        flat[idx] = min(max(v, l_min), l_max)
+        after = flat[idx] > 0.0
+        seen[idx] = True
+        if after and not before:
+            occupied[n_occ] = idx
+            n_occ += 1
+        elif before and not after:
+            n_free += 1
+    return np.sort(occupied[:n_occ]), n_free, reach
 
 
 @dataclass(frozen=True)
@@ -160,6 +246,37 @@ class LogOddsGrid:
     def insert_rays(self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray) -> InsertResult:
         """Integrate one scan's rays ``origins[i] -> ends[i]`` (grid frame). ``hit[i]`` marks the end
         as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
+        Compiled (:func:`_insert_kernel`); semantics as :meth:`insert_rays_reference`."""
+        origins = np.asarray(origins, dtype=float).reshape(-1, 2)
+        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+        if ends.shape[0] == 0:
+            return InsertResult(np.zeros(0, np.int64), 0, False, np.ones(0))
+        if origins.shape[0] == 1 and ends.shape[0] > 1:
+            origins = np.broadcast_to(origins, ends.shape)
+        hit = np.asarray(hit, dtype=bool)
+        old_shape = self.shape
+        self.ensure_contains(np.vstack((origins, ends)))
+        opt = self.options
+        occupied, n_free, reach = _insert_kernel(
+            self.logodds.reshape(-1),
+            self.seen.reshape(-1),
+            self.shape[1],
+            float(self.origin[0]),
+            float(self.origin[1]),
+            self.resolution,
+            np.ascontiguousarray(origins),
+            np.ascontiguousarray(ends),
+            np.ascontiguousarray(hit),
+            self.resolution * opt.step_fraction,
+            np.float32(opt.l_occ),
+            np.float32(opt.l_free),
+            np.float32(opt.l_min),
+            np.float32(opt.l_max),
+        )
+        return InsertResult(occupied, n_free, self.shape != old_shape, reach)
+
+    def insert_rays_reference(self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray) -> InsertResult:
+        """Pure-numpy reference of :meth:`insert_rays` (the tests compare the two).
 
         Each cell is updated once: hit cells by ``l_occ``, other traversed cells by ``l_free``.
         Duplicates are removed with a scratch mark array over the grid (O(cells), no sort).

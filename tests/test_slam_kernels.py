@@ -100,3 +100,28 @@ def test_search_with_the_compiled_scores_finds_the_true_pose() -> None:
         pose, score = correlative_search(field, pts, Pose2D(0.17, -0.12, math.radians(6)), window)
         assert math.hypot(pose.x, pose.y) < 0.05 and abs(pose.theta) < math.radians(1.0), pose
         assert score > 0.6
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_compiled_ray_insertion_equals_the_reference(seed: int) -> None:
+    # several scans from different poses, with returns and return-less rays (which stop at
+    # occupied cells), into two grids: one per implementation; every result must be identical
+    world, res = box_world()
+    rng = np.random.default_rng(seed)
+    fast = LogOddsGrid(LogOddsOptions(resolution=0.05))
+    ref = LogOddsGrid(LogOddsOptions(resolution=0.05))
+    for k in range(6):
+        pose = Pose2D(3.0 + 0.4 * k, 2.0 + 0.2 * k, 0.3 * k)
+        pts = cast_scan(world, res, pose, 360, noise=0.01, rng=rng).points()
+        angles = rng.uniform(-math.pi, math.pi, 40)
+        misses = 5.0 * np.column_stack((np.cos(angles), np.sin(angles)))
+        origin = np.array([[pose.x, pose.y]])
+        ends = np.vstack((pose.transform_points(pts), pose.transform_points(misses)))
+        hit = np.concatenate((np.ones(len(pts), bool), np.zeros(len(misses), bool)))
+        a = fast.insert_rays(origin, ends, hit)
+        b = ref.insert_rays_reference(origin, ends, hit)
+        assert np.array_equal(a.became_occupied, b.became_occupied)
+        assert a.became_free == b.became_free and a.resized == b.resized
+        assert np.array_equal(a.miss_reach, b.miss_reach)
+        assert np.array_equal(fast.logodds, ref.logodds) and np.array_equal(fast.seen, ref.seen)
+    assert (a.miss_reach < 1.0).any()  # some return-less rays did stop at a wall
