@@ -15,6 +15,20 @@ cells (seed 0, corner to corner) and 20 MovingAI den312d scenarios (the first 20
 traversability with unit cell weight; navdeck runs the planner's kernel (``nav.planning.bucket_search``:
 exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., allow_diagonal=True)``
 (a diagonal step costs 1 and blocked corners may be cut: an easier problem).
+
+Scan matching inputs (Intel Research Lab log, 180-beam laser at base_link's origin): 50 consecutive
+scan pairs (from scan ``CONSECUTIVE_START``) and the first 50 ground-truth relations of
+``intel.relations`` whose heading change is below ``RELATION_MAX_TURN`` (larger motion, seconds
+apart: the two 180 deg scans still overlap). The current scan is matched against the reference
+scan alone, from the odometry prior. Both sides use the same 0.05 m grid and the same range limit
+(``MATCH_RANGE``, navdeck's ``max_laser_range`` and slam_toolbox's default); each side builds its
+own grid from the reference scan inside the timed call. navdeck: ``LikelihoodField.from_points`` of
+the reference's returns then ``match_scan_with_fallback`` with the SLAM front end's windows
+(+-0.1 m / +-10 deg at 0.5 deg; below score 0.6 again in +-0.5 m / +-30 deg); karto-scanmatcher
+(OpenKarto's ScanMatcher): its defaults (+-0.15 m, +-20 deg coarse at 2 deg, fine at 0.2 deg,
+smear 0.03 m, distance / angle penalties) at resolution 0.05, ``match_scan(scan, [reference],
+penalize=True, refine=True)``. Accuracy on the relation pairs: translational error of each side's
+estimate against the relation (Kuemmerle et al. 2009's ``|translation(z^-1 d)|``).
 """
 
 from __future__ import annotations
@@ -36,15 +50,20 @@ from bench import pythonrobotics_dwa as prd
 from bench.amcl import LASER_POSE, load_map, synth_scans
 from bench.amcl import WILLOW as WILLOW_01
 from bench.core import Benchmark, Figure
-from bench.datasets import MOVINGAI, ROS_MAPS
+from bench.datasets import MOVINGAI, ROS_MAPS, SLAM_BENCHMARK
 from bench.planning import _component_corners, _real_map_costmap
 from nav.control import DwaController, DwaOptions, NoValidControl
 from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
 from nav.planning.bucket_search import octile_search
-from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, OccupancyGrid, Pose2D, Twist2D
+from nav.slam.field import LikelihoodField
+from nav.slam.matcher import RefineOptions, SearchWindow, match_scan_with_fallback
+from nav.slam.metric import parse_relations, relative_poses
+from nav.slam.system import SlamOptions
+from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from nav.types import Path as NavPath
 from robot.clock import VirtualClock
+from robot.logs.reader import load_raw_log
 from robot.profiles import load_profile
 from robot.sim import SimDriver, SimOptions, World
 
@@ -55,6 +74,13 @@ SCENARIOS = 20
 # A round plans the den312d scenarios this many times: one pass lasts ~1 ms, the length of a
 # scheduler time slice, so on a loaded machine single passes gave medians 4x apart between runs.
 SCENARIO_PASSES = 10
+INTEL_BAG = SLAM_BENCHMARK / "bags/intel.orig.bag"
+INTEL_RELATIONS = SLAM_BENCHMARK / "relations/intel.relations"
+PAIRS = 50
+CONSECUTIVE_START = 100
+"""First scan of the consecutive pairs (the robot is moving there)."""
+RELATION_MAX_TURN = math.radians(45.0)
+MATCH_RANGE = 20.0
 MOVINGAI_PASSABLE = frozenset(".GS")  # MovingAI map legend: '.', 'G', 'S' passable; '@', 'O', 'T', 'W' not
 
 
@@ -85,7 +111,8 @@ def optional_import(name: str) -> ModuleType | None:
 # The peers, imported once at module level; a missing or broken one is None and only its row is
 # skipped (see optional_import).
 PYASTAR2D = optional_import("pyastar2d")
-REPORTED_PEERS = {name: optional_import(name) for name in ("karto_scanmatcher", "amcl", "irsim")}
+KARTO = optional_import("karto_scanmatcher")
+REPORTED_PEERS = {name: optional_import(name) for name in ("amcl", "irsim")}
 MPIMG = optional_import("matplotlib.image")  # installed with ir-sim; writes its image map
 
 
@@ -199,6 +226,152 @@ def _astar_rows(pyastar2d: ModuleType | None) -> list[Row]:
     else:
         rows.append(Row("A*, MovingAI den312d", None, peer, None, f"{DEN312D} missing"))
     return rows
+
+
+# --- scan matching -------------------------------------------------------------------------------
+
+MatchPair = tuple[LaserScan, LaserScan, Pose2D]  # reference, current, odometry prior (current in ref)
+
+
+def _scan_points(scan: LaserScan) -> np.ndarray:
+    r = scan.ranges
+    ok = np.isfinite(r) & (r >= scan.range_min) & (r <= MATCH_RANGE)
+    a = scan.angles[ok]
+    return np.column_stack((r[ok] * np.cos(a), r[ok] * np.sin(a)))
+
+
+class NavdeckScanMatcher:
+    """navdeck's scan-to-scan match: the reference's likelihood field, then the front end's search
+    (narrow window, the wide one below the front end's score threshold) and refinement."""
+
+    def __init__(self) -> None:
+        o = SlamOptions()
+        self.resolution, self.sigma = o.resolution, o.likelihood_sigma
+        self.window = SearchWindow(o.linear_search_window, o.angular_search_window, o.angular_search_step)
+        self.wide = SearchWindow(
+            o.wide_linear_search_window, o.wide_angular_search_window, o.angular_search_step, 2
+        )
+        self.minimum_score = o.wide_search_minimum_score
+        self.refine = RefineOptions(
+            translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
+        )
+
+    def match(self, reference: np.ndarray, current: np.ndarray, prior: Pose2D) -> Pose2D:
+        field = LikelihoodField.from_points(reference, self.resolution, self.sigma)
+        pose, _ = match_scan_with_fallback(
+            field, current, prior, self.window, self.wide, self.minimum_score, self.refine
+        )
+        return pose
+
+
+class KartoScanMatcher:
+    """karto-scanmatcher (OpenKarto's ScanMatcher via pybind11) on the same scans."""
+
+    def __init__(self, karto: ModuleType, scan: LaserScan) -> None:
+        self.k = karto
+        cfg = karto.ScanMatcherConfig()
+        cfg.resolution = SlamOptions().resolution
+        cfg.range_threshold = MATCH_RANGE
+        self.wrapper = karto.Wrapper(cfg)
+        n = scan.ranges.shape[0]
+        self.laser = karto.LaserScanConfig(
+            float(scan.angle_min),
+            float(scan.angle_min + scan.angle_increment * (n - 1)),
+            float(scan.angle_increment),
+            float(scan.range_min),
+            float(scan.range_max),
+            MATCH_RANGE,
+            "laser",
+        )
+
+    def scan(self, scan: LaserScan, pose: Pose2D, num: int) -> object:
+        # karto ignores readings beyond range_threshold: no return / invalid -> beyond it
+        r = np.where(np.isfinite(scan.ranges), scan.ranges, MATCH_RANGE + 1.0)
+        p = self.k.Pose2(pose.x, pose.y, pose.theta)
+        return self.k.LocalizedRangeScan(self.laser, r.astype(float).tolist(), p, p, num, float(scan.stamp))
+
+    def match(self, reference: object, current: object) -> Pose2D:
+        result = self.wrapper.match_scan(current, [reference], True, True)
+        b = result.best_pose
+        return Pose2D(b.x, b.y, b.yaw)
+
+
+def intel_pairs() -> tuple[list[MatchPair], list[MatchPair], np.ndarray]:
+    """(consecutive pairs, relation pairs, the relation pairs' true relative poses (N, 3))."""
+    raw = load_raw_log(INTEL_BAG)
+    recs = raw.records()
+    stamps = np.array([float(r.scan.stamp) for r in recs])
+    consecutive = [
+        (recs[k].scan, recs[k + 1].scan, recs[k + 1].odom.relative_to(recs[k].odom))
+        for k in range(CONSECUTIVE_START, CONSECUTIVE_START + PAIRS)
+    ]
+    related, truth = [], []
+    for t1, t2, x, y, yaw in parse_relations(INTEL_RELATIONS.read_text())[:, [0, 1, 2, 3, 4]]:
+        if abs(yaw) >= RELATION_MAX_TURN:
+            continue
+        i, j = np.searchsorted(stamps, [t1, t2])
+        if j >= len(stamps) or abs(stamps[i] - t1) > 1e-3 or abs(stamps[j] - t2) > 1e-3:
+            continue
+        related.append((recs[i].scan, recs[j].scan, recs[j].odom.relative_to(recs[i].odom)))
+        truth.append((x, y, yaw))
+        if len(related) == PAIRS:
+            break
+    return consecutive, related, np.array(truth)
+
+
+def _match_rows(karto: ModuleType | None) -> list[Row]:
+    if not (INTEL_BAG.exists() and INTEL_RELATIONS.exists()):
+        return [Row("scan matching, Intel", None, "karto-scanmatcher", None, f"{INTEL_BAG} missing")]
+    consecutive, related, truth = intel_pairs()
+    ours = NavdeckScanMatcher()
+    theirs = KartoScanMatcher(karto, consecutive[0][0]) if karto is not None else None
+    return [
+        _match_row("scan-to-scan match, 50 consecutive Intel pairs", consecutive, None, ours, theirs),
+        _match_row(
+            "scan match, 50 ground-truth relation pairs (larger motion)", related, truth, ours, theirs
+        ),
+    ]
+
+
+def _match_row(
+    label: str,
+    pairs: list[MatchPair],
+    truth: np.ndarray | None,
+    ours: NavdeckScanMatcher,
+    theirs: KartoScanMatcher | None,
+) -> Row:
+    """Per-match median time of both sides over ``pairs``; with ``truth``, their accuracy."""
+    pts = [(_scan_points(a), _scan_points(b), prior) for a, b, prior in pairs]
+    estimates: dict[str, list[Pose2D]] = {}
+
+    def run_ours() -> None:
+        estimates["navdeck"] = [ours.match(ref, cur, prior) for ref, cur, prior in pts]
+
+    if theirs is not None:
+        kscans = [(theirs.scan(a, Pose2D(), 0), theirs.scan(b, prior, 1)) for a, b, prior in pairs]
+
+        def run_theirs() -> None:
+            estimates["karto"] = [theirs.match(ref, cur) for ref, cur in kscans]
+
+        a_ms, b_ms = alternating_medians(run_ours, run_theirs)
+    else:
+        a_ms, b_ms = _single(run_ours), None
+    note = "per match"
+    if truth is not None:
+        err = {
+            side: np.hypot(*relative_poses(truth, np.array([p.as_array() for p in est]))[:, :2].T)
+            for side, est in estimates.items()
+        }
+        note += f"; error to truth: navdeck {100 * err['navdeck'].mean():.2f} cm mean"
+        if "karto" in err:
+            closer = int(np.count_nonzero(err["navdeck"] < err["karto"]))
+            note += (
+                f", worst {100 * err['navdeck'].max():.1f} cm; karto {100 * err['karto'].mean():.2f} cm, "
+                f"worst {100 * err['karto'].max():.1f} cm; navdeck closer on {closer}/{len(pairs)}"
+            )
+    n = len(pairs)
+    peer = "karto-scanmatcher" if theirs is not None else "karto-scanmatcher (not installed)"
+    return Row(label, a_ms / n, peer, None if b_ms is None else b_ms / n, note)
 
 
 # --- AMCL, DWA and simulator rows ------------------------------------------------------------------
@@ -491,7 +664,7 @@ def markdown_table(rows: list[Row]) -> str:
 
 
 def bench_peers() -> list[Figure]:
-    rows = _astar_rows(PYASTAR2D)
+    rows = _astar_rows(PYASTAR2D) + _match_rows(KARTO)
     rows += _amcl_rows(REPORTED_PEERS["amcl"])
     rows += _dwa_rows()
     rows += _sim_rows(REPORTED_PEERS["irsim"])

@@ -14,6 +14,8 @@ from nav.slam.matcher import (
     RefineOptions,
     SearchWindow,
     correlative_search,
+    correlative_search_reference,
+    correlative_search_runner_up,
     refine_pose,
     refine_pose_reference,
     score_candidates_reference,
@@ -125,3 +127,25 @@ def test_compiled_ray_insertion_equals_the_reference(seed: int) -> None:
         assert np.array_equal(a.miss_reach, b.miss_reach)
         assert np.array_equal(fast.logodds, ref.logodds) and np.array_equal(fast.seen, ref.seen)
     assert (a.miss_reach < 1.0).any()  # some return-less rays did stop at a wall
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_compiled_exhaustive_search_equals_the_reference(seed: int) -> None:
+    g, pts = _world_grid(10 + seed)
+    field = LikelihoodField.from_grid(g)
+    rng = np.random.default_rng(seed)
+    prior = Pose2D(*rng.uniform([-0.08, -0.08, -0.1], [0.08, 0.08, 0.1]))
+    window = SearchWindow(0.1 + 0.05 * seed, math.radians(10), math.radians(0.5))
+    for separation in (math.inf, 0.12):
+        fast = correlative_search_runner_up(field, pts, prior, window, separation)
+        ref = correlative_search_reference(field, pts, prior, window, separation)
+        assert fast[0] == ref[0]
+        assert abs(fast[1] - ref[1]) < 1e-6 and abs(fast[2] - ref[2]) < 1e-6
+    assert fast[2] > 0.0  # some candidate lies beyond the separation
+
+
+@pytest.mark.parametrize("level", [1, 2, 4])
+def test_compiled_max_pooling_equals_the_reference(level: int) -> None:
+    g, _ = _world_grid(20)
+    field = LikelihoodField.from_grid(g, levels=level)
+    assert np.array_equal(field.pooled[level], field.pooled_reference(level))

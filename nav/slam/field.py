@@ -82,12 +82,17 @@ class LikelihoodField:
     def ensure_levels(self, levels: int) -> None:
         """Build max-pooled grids up to ``2^levels`` cells wide."""
         while len(self.pooled) <= levels:
-            prev = self.pooled[-1]
             s = 1 << (len(self.pooled) - 1)
-            p = np.pad(prev, ((0, s), (0, s)))
-            self.pooled.append(
-                np.maximum(np.maximum(p[:-s, :-s], p[s:, :-s]), np.maximum(p[:-s, s:], p[s:, s:]))
-            )
+            self.pooled.append(kernels.max_pool(self.pooled[-1], s))
+
+    def pooled_reference(self, level: int) -> np.ndarray:
+        """Pure-numpy reference of ``pooled[level]`` (the tests compare it with the kernel's)."""
+        g = self.field
+        for k in range(level):
+            s = 1 << k
+            p = np.pad(g, ((0, s), (0, s)))
+            g = np.maximum(np.maximum(p[:-s, :-s], p[s:, :-s]), np.maximum(p[:-s, s:], p[s:, s:]))
+        return g
 
     def lookup(self, level: int, rows: np.ndarray, cols: np.ndarray) -> np.ndarray:
         """``pooled[level]`` at integer cells; zero outside the grid."""

@@ -153,3 +153,82 @@ def splat(field: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernel: np.ndar
                 v = np.float32(kernel[k, 2])
                 if v > field[r, c]:
                     field[r, c] = v
+
+
+@njit(cache=True, nogil=True)
+def exhaustive_search(
+    grid: np.ndarray,
+    pts: np.ndarray,
+    cos_t: np.ndarray,
+    sin_t: np.ndarray,
+    px: float,
+    py: float,
+    ox: float,
+    oy: float,
+    res: float,
+    wc: int,
+    separation: float,
+) -> tuple[int, int, int, float, float]:
+    """The exhaustive (single-level) correlative search in one pass: every angle ``a`` (its cos /
+    sin given), every cell offset (dy, dx) in [-wc, wc]^2. Returns the best (a, dy, dx), its
+    score (mean ``grid`` value, 0 outside) and the best score of the candidates more than
+    ``separation`` (m) from it (0 if none). Ties go to the candidate nearest the prior
+    (|dy| + |dx| + |a - centre|), then to the first in (a, dy, dx) order, as in
+    ``matcher.correlative_search_reference``."""
+    h, w = grid.shape
+    n = pts.shape[0]
+    na = cos_t.shape[0]
+    side = 2 * wc + 1
+    scores = np.empty((na, side, side))
+    rows = np.empty(n, dtype=np.int64)
+    cols = np.empty(n, dtype=np.int64)
+    centre = (na - 1) // 2
+    best = -1.0
+    best_dist = 0
+    ba = bdy = bdx = 0
+    for a in range(na):
+        c, s = cos_t[a], sin_t[a]
+        for i in range(n):
+            x = c * pts[i, 0] - s * pts[i, 1] + px
+            y = s * pts[i, 0] + c * pts[i, 1] + py
+            cols[i] = math.floor((x - ox) / res)
+            rows[i] = math.floor((y - oy) / res)
+        for dy in range(-wc, wc + 1):
+            for dx in range(-wc, wc + 1):
+                acc = 0.0
+                for i in range(n):
+                    r = rows[i] + dy
+                    cc = cols[i] + dx
+                    if 0 <= r < h and 0 <= cc < w:
+                        acc += grid[r, cc]
+                sc = acc / n
+                scores[a, dy + wc, dx + wc] = sc
+                dist = abs(dy) + abs(dx) + abs(a - centre)
+                if sc > best or (sc == best and dist < best_dist):
+                    best, best_dist, ba, bdy, bdx = sc, dist, a, dy, dx
+    runner_up = 0.0
+    for a in range(na):
+        for dy in range(-wc, wc + 1):
+            for dx in range(-wc, wc + 1):
+                if math.hypot(dy - bdy, dx - bdx) * res > separation:
+                    runner_up = max(runner_up, scores[a, dy + wc, dx + wc])
+    return ba, bdy, bdx, best, runner_up
+
+
+@njit(cache=True, nogil=True)
+def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
+    """``out[r, c] = max(prev[r, c], prev[r + s, c], prev[r, c + s], prev[r + s, c + s])`` (zero
+    outside): the next max-pooled level, each cell the max over a block twice as wide."""
+    h, w = prev.shape
+    out = np.empty_like(prev)
+    for r in range(h):
+        for c in range(w):
+            v = prev[r, c]
+            if r + s < h:
+                v = max(v, prev[r + s, c])
+                if c + s < w:
+                    v = max(v, prev[r + s, c + s])
+            if c + s < w:
+                v = max(v, prev[r, c + s])
+            out[r, c] = v
+    return out

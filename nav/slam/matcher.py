@@ -93,6 +93,23 @@ def correlative_search_runner_up(
     res = field.resolution
     na = math.ceil(window.angular_search_window / window.angular_step)
     thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
+    if window.levels == 0:  # the front end's search: one compiled pass over every candidate
+        wc = math.ceil(window.linear_search_window / res)
+        a, dy, dx, best, runner_up = kernels.exhaustive_search(
+            field.field,
+            np.ascontiguousarray(pts, dtype=np.float64),
+            np.cos(thetas),
+            np.sin(thetas),
+            prior.x,
+            prior.y,
+            float(field.origin[0]),
+            float(field.origin[1]),
+            res,
+            wc,
+            separation,
+        )
+        pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+        return pose, float(best), float(runner_up)
     rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
     cell = np.floor((rot - field.origin) / res).astype(np.int64)
     rows0, cols0 = cell[..., 1], cell[..., 0]  # (A, N)
@@ -113,6 +130,54 @@ def correlative_search_runner_up(
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
         score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
+        if level > 0 and len(cand) > window.beam:
+            keep = np.argpartition(-score, window.beam)[: window.beam]
+            cand = cand[keep]
+        elif level == 0:
+            # tie-break towards the prior (smallest offset) for determinism
+            dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
+            best = np.lexsort((dist, -score))[0]
+            a, dy, dx = cand[best]
+            apart = np.hypot(cand[:, 1] - dy, cand[:, 2] - dx) * res > separation
+            runner_up = float(score[apart].max()) if apart.any() else 0.0
+            pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+            return pose, float(score[best]), runner_up
+    raise AssertionError("unreachable")
+
+
+def correlative_search_reference(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow, separation: float
+) -> tuple[Pose2D, float, float]:
+    """Pure-numpy reference of :func:`correlative_search_runner_up` (the tests compare the two; the
+    compiled path scores in float64, this one in the field's float32, so exact ties may break
+    differently)."""
+    if pts.shape[0] == 0:
+        raise ScanMatchError("no points to match")
+    if pts.shape[0] > window.max_points:
+        pts = pts[np.linspace(0, pts.shape[0] - 1, window.max_points).astype(np.int64)]
+    res = field.resolution
+    na = math.ceil(window.angular_search_window / window.angular_step)
+    thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
+    rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
+    cell = np.floor((rot - field.origin) / res).astype(np.int64)
+    rows0, cols0 = cell[..., 1], cell[..., 0]  # (A, N)
+    wc = math.ceil(window.linear_search_window / res)
+    top = window.levels
+    field.ensure_levels(top)
+    s = 1 << top
+    blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
+    a_idx, by, bx = np.meshgrid(np.arange(len(thetas)), blocks, blocks, indexing="ij")
+    cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))  # (C, 3) at level `top`
+    for level in range(top, -1, -1):
+        s = 1 << level
+        if level < top:  # split every kept candidate into its 4 children
+            kids = np.repeat(cand, 4, axis=0)
+            kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
+            kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
+            lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
+            inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
+            cand = kids[inside]  # a block meeting the window has at least one child that does
+        score = score_candidates_reference(field, level, rows0, cols0, cand, s)
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
             cand = cand[keep]
@@ -267,3 +332,23 @@ def match_scan(
     regularized towards the correlative result, as Cartographer does)."""
     coarse, _ = correlative_search(field, pts, prior, window)
     return refine_pose(field, pts, coarse, coarse, refine)
+
+
+def match_scan_with_fallback(
+    field: LikelihoodField,
+    pts: np.ndarray,
+    prior: Pose2D,
+    window: SearchWindow,
+    wide_window: SearchWindow,
+    minimum_score: float,
+    refine: RefineOptions = RefineOptions(),
+) -> tuple[Pose2D, float]:
+    """:func:`match_scan` in ``window``; a match scoring below ``minimum_score`` is searched again
+    in ``wide_window`` (the prior may be outside the narrow one: slip, a fast turn) and the better
+    of the two kept (the SLAM front end's ``wide_search_minimum_score``)."""
+    pose, score = match_scan(field, pts, prior, window, refine)
+    if score < minimum_score:
+        wide_pose, wide_score = match_scan(field, pts, prior, wide_window, refine)
+        if wide_score > score:
+            pose, score = wide_pose, wide_score
+    return pose, score

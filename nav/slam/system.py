@@ -32,7 +32,7 @@ from nav.slam.matcher import (
     ScanMatchError,
     SearchWindow,
     fuse_with_prediction,
-    match_scan,
+    match_scan_with_fallback,
     translation_information,
 )
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
@@ -431,12 +431,15 @@ class GraphSlam:
     ) -> tuple[Pose2D, float]:
         """Match ``pts`` in ``target`` around ``prior``; a poor fit is searched again in the wide
         window (the prediction may be outside the narrow one: slip, fast turn), the better kept."""
-        field = target.field()
-        pose, score = match_scan(field, pts, prior, window, self._refine)
-        if score < self.options.wide_search_minimum_score:
-            wide_pose, wide_score = match_scan(field, pts, prior, self._wide_window, self._refine)
-            if wide_score > score:
-                pose, score = wide_pose, wide_score
+        pose, score = match_scan_with_fallback(
+            target.field(),
+            pts,
+            prior,
+            window,
+            self._wide_window,
+            self.options.wide_search_minimum_score,
+            self._refine,
+        )
         if self.options.degeneracy_threshold > 0:
             info = translation_information(pts, pose.theta)
             pose = fuse_with_prediction(pose, prior, info, self.options.degeneracy_threshold)
