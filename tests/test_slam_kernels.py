@@ -63,7 +63,7 @@ def test_field_from_points_marks_the_cells_hit() -> None:
 
 @pytest.mark.parametrize("level", [0, 1, 2])
 def test_compiled_candidate_scores_equal_the_reference(level: int) -> None:
-    g, pts = _world_grid(3)
+    g, _ = _world_grid(3)
     field = LikelihoodField.from_grid(g, levels=2)
     rng = np.random.default_rng(level)
     # points partly off the grid too (those count 0 on both sides)
