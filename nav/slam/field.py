@@ -11,19 +11,24 @@ Interpolation is bilinear with its analytic gradient, for the least-squares refi
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from nav.grid import LogOddsGrid
 from nav.slam import kernels
 
 
+@functools.lru_cache(maxsize=16)
 def _kernel(sigma: float, resolution: float) -> np.ndarray:
     """(K, 3) integer offsets (dy, dx) within 3 sigma and their weights exp(-d^2 / 2 sigma^2)."""
     rad = max(1, int(np.ceil(3.0 * sigma / resolution)))
     dy, dx = np.mgrid[-rad : rad + 1, -rad : rad + 1]
     d2 = (dy * dy + dx * dx) * resolution**2
     keep = d2 <= (3.0 * sigma) ** 2
-    return np.column_stack((dy[keep], dx[keep], np.exp(-0.5 * d2[keep] / sigma**2)))
+    k = np.column_stack((dy[keep], dx[keep], np.exp(-0.5 * d2[keep] / sigma**2)))
+    k.setflags(write=False)  # cached and shared
+    return k
 
 
 class LikelihoodField:

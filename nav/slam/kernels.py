@@ -180,32 +180,41 @@ def exhaustive_search(
     na = cos_t.shape[0]
     side = 2 * wc + 1
     scores = np.empty((na, side, side))
-    rows = np.empty(n, dtype=np.int64)
-    cols = np.empty(n, dtype=np.int64)
+    acc = np.empty((side, side))
     centre = (na - 1) // 2
     best = -1.0
     best_dist = 0
     ba = bdy = bdx = 0
     for a in range(na):
         c, s = cos_t[a], sin_t[a]
+        # Olson's layout: each point adds the (2 wc + 1)^2 block of cells around it to the sums
+        # of all offsets at once (row-contiguous reads); per offset the points still add in order
+        acc[:] = 0.0
         for i in range(n):
             x = c * pts[i, 0] - s * pts[i, 1] + px
             y = s * pts[i, 0] + c * pts[i, 1] + py
-            cols[i] = math.floor((x - ox) / res)
-            rows[i] = math.floor((y - oy) / res)
-        for dy in range(-wc, wc + 1):
-            for dx in range(-wc, wc + 1):
-                acc = 0.0
-                for i in range(n):
-                    r = rows[i] + dy
-                    cc = cols[i] + dx
-                    if 0 <= r < h and 0 <= cc < w:
-                        acc += grid[r, cc]
-                sc = acc / n
-                scores[a, dy + wc, dx + wc] = sc
-                dist = abs(dy) + abs(dx) + abs(a - centre)
+            c0 = math.floor((x - ox) / res) - wc
+            r0 = math.floor((y - oy) / res) - wc
+            if r0 >= 0 and c0 >= 0 and r0 + side <= h and c0 + side <= w:  # the usual case
+                for j in range(side):
+                    for k in range(side):
+                        acc[j, k] += grid[r0 + j, c0 + k]
+                continue
+            for j in range(side):
+                r = r0 + j
+                if r < 0 or r >= h:
+                    continue
+                for k in range(side):
+                    cc = c0 + k
+                    if 0 <= cc < w:
+                        acc[j, k] += grid[r, cc]
+        for j in range(side):
+            for k in range(side):
+                sc = acc[j, k] / n
+                scores[a, j, k] = sc
+                dist = abs(j - wc) + abs(k - wc) + abs(a - centre)
                 if sc > best or (sc == best and dist < best_dist):
-                    best, best_dist, ba, bdy, bdx = sc, dist, a, dy, dx
+                    best, best_dist, ba, bdy, bdx = sc, dist, a, j - wc, k - wc
     runner_up = 0.0
     for a in range(na):
         for dy in range(-wc, wc + 1):
