@@ -149,3 +149,16 @@ def test_compiled_max_pooling_equals_the_reference(level: int) -> None:
     g, _ = _world_grid(20)
     field = LikelihoodField.from_grid(g, levels=level)
     assert np.array_equal(field.pooled[level], field.pooled_reference(level))
+
+
+@pytest.mark.parametrize(("levels", "half_width"), [(2, 0.5), (4, 1.5)])
+def test_compiled_coarse_to_fine_search_equals_the_reference(levels: int, half_width: float) -> None:
+    g, pts = _world_grid(30 + levels)
+    field = LikelihoodField.from_grid(g, levels=levels)
+    prior = Pose2D(0.3, -0.2, math.radians(8))
+    window = SearchWindow(half_width, math.radians(20), math.radians(0.5), levels=levels, beam=48)
+    fast = correlative_search_runner_up(field, pts, prior, window, 0.5)
+    ref = correlative_search_reference(field, pts, prior, window, 0.5)
+    assert fast[0] == ref[0]
+    assert abs(fast[1] - ref[1]) < 1e-6 and abs(fast[2] - ref[2]) < 1e-6
+    assert math.hypot(fast[0].x, fast[0].y) < 0.06

@@ -241,3 +241,29 @@ def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
                 v = max(v, prev[r, c + s])
             out[r, c] = v
     return out
+
+
+@njit(cache=True, nogil=True)
+def block_scores(
+    grid: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, lo: int, nb: int, step: int
+) -> np.ndarray:
+    """(A, nb, nb) scores of the whole top level of a coarse-to-fine search: at angle ``a`` the
+    block offset (lo + j, lo + k) in units of ``step`` cells; the same sums as
+    :func:`score_candidates` over all (a, j, k), accumulated point by point (Olson's layout)."""
+    h, w = grid.shape
+    na, n = rows0.shape
+    out = np.zeros((na, nb, nb))
+    for a in range(na):
+        acc = out[a]
+        for i in range(n):
+            r0 = rows0[a, i] + lo * step
+            c0 = cols0[a, i] + lo * step
+            for j in range(nb):
+                r = r0 + j * step
+                if r < 0 or r >= h:
+                    continue
+                for k in range(nb):
+                    c = c0 + k * step
+                    if 0 <= c < w:
+                        acc[j, k] += grid[r, c]
+    return out / n

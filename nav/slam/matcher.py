@@ -112,7 +112,7 @@ def correlative_search_runner_up(
         return pose, float(best), float(runner_up)
     rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
     cell = np.floor((rot - field.origin) / res).astype(np.int64)
-    rows0, cols0 = cell[..., 1], cell[..., 0]  # (A, N)
+    rows0, cols0 = np.ascontiguousarray(cell[..., 1]), np.ascontiguousarray(cell[..., 0])  # (A, N)
     wc = math.ceil(window.linear_search_window / res)
     top = window.levels
     field.ensure_levels(top)
@@ -129,7 +129,11 @@ def correlative_search_runner_up(
             lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
-        score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
+            score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
+        else:  # every (angle, block) of the top level, in `cand`'s order
+            score = kernels.block_scores(
+                field.pooled[top], rows0, cols0, int(blocks[0]), len(blocks), s
+            ).ravel()
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
             cand = cand[keep]
