@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import numpy as np
@@ -9,7 +10,10 @@ import pytest
 
 from bench import pythonrobotics_dwa as prd
 from bench.peers import (
+    KartoScanMatcher,
+    NavdeckScanMatcher,
     Row,
+    _scan_points,
     load_movingai_map,
     load_scenarios,
     markdown_table,
@@ -17,6 +21,8 @@ from bench.peers import (
     optional_import,
     random_grid,
 )
+from nav.slam.synthetic import box_world, cast_scan
+from nav.types import Pose2D
 
 
 def test_movingai_map_and_scenarios(tmp_path: Path) -> None:
@@ -79,3 +85,25 @@ def test_pythonrobotics_dwa_reference_follows_its_published_rules() -> None:
         assert np.isfinite(prd.obstacle_cost(best, prd.OBSTACLES, cfg))
         x = prd.motion(x, v, w, cfg.dt)
     assert np.hypot(*(x[:2] - prd.GOAL)) < np.hypot(*(prd.START[:2] - prd.GOAL))
+
+
+@pytest.mark.parametrize("side", ["navdeck", "karto"])
+def test_both_scan_matchers_recover_a_known_motion(side: str) -> None:
+    # two scans of the box world 0.12 m / 3 deg apart, 180-beam 180 deg laser like Intel's; the
+    # odometry prior is off by (0.04, -0.03, 1.5 deg) = 5 cm: both sides must land within a grid
+    # cell (karto's search is on the 0.05 m lattice, without sub-cell refinement)
+    grid, res = box_world()
+    rng = np.random.default_rng(0)
+    a, b = Pose2D(3.0, 2.0, 0.3), Pose2D(3.115, 2.035, 0.3 + math.radians(3.0))
+    ref = cast_scan(grid, res, a, 180, fov=math.pi, noise=0.005, rng=rng)
+    cur = cast_scan(grid, res, b, 180, fov=math.pi, noise=0.005, rng=rng)
+    truth = b.relative_to(a)
+    prior = Pose2D(truth.x + 0.04, truth.y - 0.03, truth.theta + math.radians(1.5))
+    if side == "navdeck":
+        got = NavdeckScanMatcher().match(_scan_points(ref), _scan_points(cur), prior)
+    else:
+        karto = pytest.importorskip("karto_scanmatcher")
+        m = KartoScanMatcher(karto, ref)
+        got = m.match(m.scan(ref, Pose2D(), 0), m.scan(cur, prior, 1))
+    assert got.distance_to(truth) < 0.035, (got, truth)
+    assert abs(got.theta - truth.theta) < math.radians(1.0)
