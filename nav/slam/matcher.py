@@ -86,6 +86,27 @@ def correlative_search_runner_up(
     """:func:`correlative_search`, plus the best score of the final candidates more than
     ``separation`` (m) away from the best one (0 when there is none): a runner-up almost as good
     as the best says the match is ambiguous (a corridor that looks the same a few metres along)."""
+    return _correlative(field, pts, prior, window, separation, compiled=True)
+
+
+def correlative_search_reference(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow, separation: float
+) -> tuple[Pose2D, float, float]:
+    """Pure-numpy reference of :func:`correlative_search_runner_up` (the tests compare the two; the
+    compiled path scores in float64, this one in the field's float32, so exact ties may break
+    differently)."""
+    return _correlative(field, pts, prior, window, separation, compiled=False)
+
+
+def _correlative(
+    field: LikelihoodField,
+    pts: np.ndarray,
+    prior: Pose2D,
+    window: SearchWindow,
+    separation: float,
+    compiled: bool,
+) -> tuple[Pose2D, float, float]:
+    """The correlative search, scored by the numba kernels (``compiled``) or by numpy."""
     if pts.shape[0] == 0:
         raise ScanMatchError("no points to match")
     if pts.shape[0] > window.max_points:
@@ -93,8 +114,8 @@ def correlative_search_runner_up(
     res = field.resolution
     na = math.ceil(window.angular_search_window / window.angular_step)
     thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
-    if window.levels == 0:  # the front end's search: one compiled pass over every candidate
-        wc = math.ceil(window.linear_search_window / res)
+    wc = math.ceil(window.linear_search_window / res)
+    if compiled and window.levels == 0:  # the front end's search: one compiled pass
         a, dy, dx, best, runner_up = kernels.exhaustive_search(
             field.field,
             np.ascontiguousarray(pts, dtype=np.float64),
@@ -113,7 +134,6 @@ def correlative_search_runner_up(
     rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
     cell = np.floor((rot - field.origin) / res).astype(np.int64)
     rows0, cols0 = np.ascontiguousarray(cell[..., 1]), np.ascontiguousarray(cell[..., 0])  # (A, N)
-    wc = math.ceil(window.linear_search_window / res)
     top = window.levels
     field.ensure_levels(top)
     s = 1 << top
@@ -129,59 +149,13 @@ def correlative_search_runner_up(
             lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
+        if not compiled:
+            score = score_candidates_reference(field, level, rows0, cols0, cand, s)
+        elif level < top:
             score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
         else:  # every (angle, block) of the top level, in `cand`'s order
-            score = kernels.block_scores(
-                field.pooled[top], rows0, cols0, int(blocks[0]), len(blocks), s
-            ).ravel()
-        if level > 0 and len(cand) > window.beam:
-            keep = np.argpartition(-score, window.beam)[: window.beam]
-            cand = cand[keep]
-        elif level == 0:
-            # tie-break towards the prior (smallest offset) for determinism
-            dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
-            best = np.lexsort((dist, -score))[0]
-            a, dy, dx = cand[best]
-            apart = np.hypot(cand[:, 1] - dy, cand[:, 2] - dx) * res > separation
-            runner_up = float(score[apart].max()) if apart.any() else 0.0
-            pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
-            return pose, float(score[best]), runner_up
-    raise AssertionError("unreachable")
-
-
-def correlative_search_reference(
-    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow, separation: float
-) -> tuple[Pose2D, float, float]:
-    """Pure-numpy reference of :func:`correlative_search_runner_up` (the tests compare the two; the
-    compiled path scores in float64, this one in the field's float32, so exact ties may break
-    differently)."""
-    if pts.shape[0] == 0:
-        raise ScanMatchError("no points to match")
-    if pts.shape[0] > window.max_points:
-        pts = pts[np.linspace(0, pts.shape[0] - 1, window.max_points).astype(np.int64)]
-    res = field.resolution
-    na = math.ceil(window.angular_search_window / window.angular_step)
-    thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
-    rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
-    cell = np.floor((rot - field.origin) / res).astype(np.int64)
-    rows0, cols0 = cell[..., 1], cell[..., 0]  # (A, N)
-    wc = math.ceil(window.linear_search_window / res)
-    top = window.levels
-    field.ensure_levels(top)
-    s = 1 << top
-    blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
-    a_idx, by, bx = np.meshgrid(np.arange(len(thetas)), blocks, blocks, indexing="ij")
-    cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))  # (C, 3) at level `top`
-    for level in range(top, -1, -1):
-        s = 1 << level
-        if level < top:  # split every kept candidate into its 4 children
-            kids = np.repeat(cand, 4, axis=0)
-            kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
-            kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
-            lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
-            inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
-            cand = kids[inside]  # a block meeting the window has at least one child that does
-        score = score_candidates_reference(field, level, rows0, cols0, cand, s)
+            score = kernels.block_scores(field.pooled[top], rows0, cols0, int(blocks[0]), len(blocks), s)
+            score = score.ravel()
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
             cand = cand[keep]
