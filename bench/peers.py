@@ -306,7 +306,7 @@ def intel_pairs() -> tuple[list[MatchPair], list[MatchPair], np.ndarray]:
         for k in range(CONSECUTIVE_START, CONSECUTIVE_START + PAIRS)
     ]
     related, truth = [], []
-    for t1, t2, x, y, yaw in parse_relations(INTEL_RELATIONS.read_text())[:, [0, 1, 2, 3, 4]]:
+    for t1, t2, x, y, yaw in parse_relations(INTEL_RELATIONS.read_text()):
         if abs(yaw) >= RELATION_MAX_TURN:
             continue
         i, j = np.searchsorted(stamps, [t1, t2])
