@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nav.slam.pose_graph import EdgeSet, edge_errors, optimize_pose_graph
+from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -84,3 +84,26 @@ def test_huber_kernel_limits_a_false_closure() -> None:
     err_l2 = np.hypot(*(x_l2[:, :2] - truth[:, :2]).T).max()
     assert err_rob < 0.5 * err_l2
     assert w[-1] < 0.2  # the false closure is strongly down-weighted
+
+
+def test_dcs_kernel_switches_a_false_closure_off() -> None:
+    """Huber keeps pulling a wrong closure with a bounded force; DCS (Agarwal et al. 2013) scales its
+    information by s^2 -> 0, so the graph returns to what the other edges say."""
+    truth = _circle(100)
+    i = np.arange(99)
+    z = _rel(truth[i], truth[i + 1])
+    good_i, good_j = np.array([0, 5]), np.array([99, 99])
+    bad = np.array([[3.0, -2.0, 1.0]])
+    edges = EdgeSet(
+        np.concatenate((i, good_i, [30])),
+        np.concatenate((i + 1, good_j, [70])),
+        np.vstack((z, _rel(truth[good_i], truth[good_j]), bad)),
+        np.tile([50.0, 50.0, 100.0], (102, 1)),
+        np.concatenate((np.zeros(99, bool), np.ones(3, bool))),
+    )
+    x_huber, _ = optimize_pose_graph(truth, edges, options=PoseGraphOptions(huber_delta=3.0))
+    x_dcs, w = optimize_pose_graph(truth, edges, options=PoseGraphOptions(kernel="dcs", dcs_phi=9.0))
+    err_huber = np.hypot(*(x_huber[:, :2] - truth[:, :2]).T).max()
+    err_dcs = np.hypot(*(x_dcs[:, :2] - truth[:, :2]).T).max()
+    assert err_dcs < 0.01 < err_huber
+    assert w[-1] < 1e-3 and np.all(w[-3:-1] == 1.0)  # the good closures keep their full weight
