@@ -90,6 +90,34 @@ def test_goals_while_mapping_drive_without_leaving_mapping():
         s.close()
 
 
+def test_a_stuck_goal_while_mapping_recovers_without_leaving_mapping():
+    stack = _stack()
+    s, nav = stack.session, stack.navigation
+    try:
+        stack.mapping.start()
+        assert _run_until(stack, nav.mapping_live, 5.0)
+        goal = _known_free_goal(stack, s.pose, 1.5)
+        nav.set_goals([goal])
+        assert _run_until(stack, lambda: nav.active and nav.navigator.state.value == "following", 10.0)
+        nav.navigator.halt("NoValidControl", "test: blocked once")  # as if the controller found no way
+        assert _run_until(stack, lambda: nav.recovering, 1.0)  # the recovery tree runs, in MAPPING
+        assert s.modes.mode == Mode.MAPPING
+        assert _run_until(stack, lambda: nav.last_outcome is not None and not nav.active, 120.0)
+        assert nav.last_outcome["kind"] == "reached", nav.last_outcome
+        recoveries = [e for e in s.events if e["type"] == "recovery"]
+        assert [e for e in recoveries if e.get("status") == "started"], recoveries
+        assert [e for e in recoveries if e.get("status") == "finished"], recoveries
+        assert [e["to"] for e in s.events if e["type"] == "mode"] == ["mapping"]  # one session
+        assert stack.mapping.running and loc_updates(stack) == 0  # AMCL stayed off
+        assert s.collisions == 0
+    finally:
+        s.close()
+
+
+def loc_updates(stack) -> int:
+    return stack.navigation.localization.updates
+
+
 def test_amcl_stays_off_while_mapping():
     stack = _stack()
     s = stack.session

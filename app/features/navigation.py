@@ -15,8 +15,9 @@ Navigate while mapping. In MAPPING a goal drives the robot without leaving the m
 session, one recorded run): the costmaps are rebuilt from each map SLAM publishes (about 1 Hz,
 ``Mapping.add_grid_listener``), SLAM's pose localizes (AMCL is off in MAPPING), the MAPPING command
 source drives while such a request runs, and an operator's teleop input cancels it (the operator
-took over). Recovery behaviours are not run there (entering RECOVERING would end the mapping
-session): a stuck request fails and its caller (the operator, the explorer) picks another goal.
+took over). A stuck request recovers there too (the same recovery tree), without leaving MAPPING:
+the policy's command is the MAPPING command source's while it runs (entering RECOVERING would end
+the mapping session); no behaviour there touches AMCL, which stays off.
 
 Recovery hook: when the navigator is STUCK and a ``RecoveryPolicy`` is installed
 (``feature.recovery = policy``), the mode goes to RECOVERING and the policy drives until it says it
@@ -358,6 +359,7 @@ class Navigation:
         self.mapping: Any = None  # the mapping feature, when set up: goals while it runs
         self._live_generation: int | None = None  # mapping session whose live map the costmaps hold
         self._in_mapping = False  # the running request drives in MAPPING
+        self._mapping_recovery = False  # a recovery runs for it (MAPPING has no RECOVERING mode)
         self.live_grid: OccupancyGrid | None = None  # the SLAM map the costmaps were built from
         self._build_costmaps(localization.grid)
         localization.add_map_listener(self._on_map)
@@ -741,11 +743,13 @@ class Navigation:
                 self._futures.clear()
                 self._active = True
                 self._in_mapping = in_mapping
+                self._mapping_recovery = False
                 self._notify("started", rid, goals=list(goals))
             elif kind == "cancel" and self._active:
                 self._cause = arg
                 self.navigator.cancel()
-                if session.modes.mode == Mode.RECOVERING:  # the navigator reports it on its next tick
+                self._mapping_recovery = False  # the navigator reports it on its next tick
+                if session.modes.mode == Mode.RECOVERING:
                     session.modes.enter(Mode.NAVIGATING, "cancel during recovery")
         if self._global is None or self._local is None:
             self._cmd = None
@@ -758,14 +762,16 @@ class Navigation:
             if self._cause is None:
                 self._cause = self._mode_cause(mode)
             self.navigator.cancel()  # the operator took over, e-stop, fault...
+            self._mapping_recovery = False
         elif self._active and self._in_mapping and session.teleop_engaged(now):
             if self._cause is None:
                 self._cause = StopCause(StopReason.TELEOP, "operator", "the operator drove by hand")
             self.navigator.cancel()
+            self._mapping_recovery = False
         if not self._active:
             self._cmd = ZERO_TWIST
             return
-        if mode == Mode.RECOVERING:
+        if mode == Mode.RECOVERING or self._mapping_recovery:
             self._lost()
             self._tick_recovery(now)
             return
@@ -784,6 +790,9 @@ class Navigation:
             self._watch(session, now)
         if self.navigator.state.value == "stuck" and mode == Mode.NAVIGATING:
             self._blame_localization()
+            self._maybe_recover(self.navigator.stuck_reason, now)
+        elif self.navigator.state.value == "stuck" and self._in_mapping:
+            # SLAM localizes: no AMCL to blame; a wall under the footprint is SLAM's to fix
             self._maybe_recover(self.navigator.stuck_reason, now)
 
     def _mode_cause(self, mode: Mode) -> StopCause:
@@ -971,6 +980,7 @@ class Navigation:
         out = tick.outcome
         assert out is not None
         self._active = False
+        self._mapping_recovery = False
         self._futures.clear()
         goals = self.navigator.goals
         # the goal it reached last, or the one it was heading for when it failed / was cancelled
@@ -1029,12 +1039,16 @@ class Navigation:
             self._active = False
 
     def _maybe_recover(self, reason: str, now: float) -> None:
-        """The recovery hook: hand a STUCK navigator to the policy (mode RECOVERING), if any."""
+        """The recovery hook: hand a STUCK navigator to the policy (mode RECOVERING, or staying in
+        MAPPING for a request sent there), if any."""
         if self.recovery is None or not self.recovery.start(self, reason, now):
             return
         self.recoveries += 1
         self.session.add_event("recovery", status="started", reason=reason)
-        self.session.modes.enter(Mode.RECOVERING, f"recovering: {reason}")
+        if self._in_mapping:
+            self._mapping_recovery = True
+        else:
+            self.session.modes.enter(Mode.RECOVERING, f"recovering: {reason}")
 
     def _tick_recovery(self, now: float) -> None:
         assert self.recovery is not None
@@ -1046,7 +1060,10 @@ class Navigation:
             self._safety_stop_since = None
             self.navigator.resume()
             self.session.add_event("recovery", status="finished")
-            self.session.modes.enter(Mode.NAVIGATING, "recovery finished")
+            if self._mapping_recovery:
+                self._mapping_recovery = False
+            else:
+                self.session.modes.enter(Mode.NAVIGATING, "recovery finished")
 
     def clear_local_costmap(self) -> None:
         """Clear the local obstacle layer (Nav2 ClearEntireCostmap on the local costmap)."""
@@ -1071,7 +1088,7 @@ class Navigation:
             self._costmap_version += 1
 
     def _command(self, now: float) -> Twist2D | None:
-        return self._cmd
+        return self._recovery_cmd if self._mapping_recovery else self._cmd
 
     def _recovery_command(self, now: float) -> Twist2D | None:
         return self._recovery_cmd
@@ -1123,6 +1140,11 @@ class Navigation:
     def path(self) -> Path | None:
         return self.navigator.path if self._active else None
 
+    @property
+    def recovering(self) -> bool:
+        """A recovery behaviour drives now (mode RECOVERING, or inside MAPPING)."""
+        return self.session.modes.mode == Mode.RECOVERING or (self._active and self._mapping_recovery)
+
     def mark_recovery(self, behavior: str) -> None:
         """Remember where a recovery attempt started (loop thread), for the 3D view."""
         p = self.session.pose
@@ -1134,7 +1156,7 @@ class Navigation:
         if not self._active:
             return None
         policy = getattr(self.recovery, "policy", None)
-        if self.session.modes.mode == Mode.RECOVERING:
+        if self.recovering:
             active = getattr(policy, "active", None)
             return getattr(active, "name", None) or "recovery"
         tick = self._last_tick
