@@ -118,6 +118,33 @@ def loc_updates(stack) -> int:
     return stack.navigation.localization.updates
 
 
+def test_the_live_maps_walls_are_lethal_in_the_costmaps():
+    """SLAM's live map holds probabilities (a wall cell 70..97, rarely 100): read as map_server's
+    trinary map would be (occupied_thresh 0.65), not with the loaded map's threshold 100, which
+    left the global costmap without walls once its obstacle layer had no marks."""
+    stack = _stack()
+    s, nav = stack.session, stack.navigation
+    try:
+        stack.mapping.start()
+        assert _run_until(stack, nav.mapping_live, 5.0)
+        s.run_for(4.0)  # a few more maps
+        nav.clear_costmaps()  # the layers' lidar marks gone: what is left is the live map's
+        live = nav.live_grid.data
+        walls = live >= 65
+        assert np.count_nonzero(walls & (live < 100)) > 20  # such walls exist
+        gc = nav.global_costmap
+        assert gc.geometry == nav.live_grid.geometry
+        assert np.all(gc.costs[walls] == LETHAL_OBSTACLE)
+        assert np.all(gc.costs[(live >= 0) & (live < 65)] < LETHAL_OBSTACLE)  # free stays free
+        lc = nav.local_costmap
+        rows, cols = gc.geometry.world_to_cell(lc.geometry.cell_to_world(*np.nonzero(lc.costs >= 0)))
+        local_walls = walls[rows, cols].reshape(-1)
+        assert np.count_nonzero(local_walls) > 0
+        assert np.all(lc.costs[lc.costs >= 0].reshape(-1)[local_walls] == LETHAL_OBSTACLE)
+    finally:
+        s.close()
+
+
 def test_amcl_stays_off_while_mapping():
     stack = _stack()
     s = stack.session

@@ -256,6 +256,12 @@ class NavigationOptions:
     gap_margin: float = 0.05
     """Metres beyond the inscribed radius a path keeps from obstacles: gaps narrower than twice
     (inscribed radius + margin) are not planned through (``PlannerOptions.max_cost``)."""
+    live_map_occupied_threshold: int = 65
+    """Occupancy (0..100) from which a cell of SLAM's live map is lethal in the costmaps' static
+    layer while mapping (map_server's ``occupied_thresh`` 0.65, as a saved map is thresholded; the
+    frontier search reads the map the same way). The live map holds probabilities, so its walls
+    stay below the static layer's ``lethal_cost_threshold`` 100 for a loaded map: with that
+    threshold the global costmap had no walls, and paths went through them."""
     global_update_period: float = 1.0
     """Seconds between obstacle-layer updates of the global costmap (Nav2 ``update_frequency`` 1 Hz)."""
     goal_search_radius: float = 3.0
@@ -413,7 +419,15 @@ class Navigation:
             limit = min(limit, int(inflation_cost(clearance, inscribed, infl)))
         return PlannerOptions(allow_unknown=o.allow_unknown, unknown_cost=o.unknown_cost, max_cost=limit)
 
-    def _costmap_options(self, rolling: bool):
+    def _costmap_options(self, rolling: bool, live: bool = False) -> CostmapOptions:
+        """Options of the local (``rolling``) or global costmap; ``live``: over SLAM's live map."""
+        opts = self._layer_options(rolling)
+        if not live:
+            return opts
+        static = replace(opts.static_layer, lethal_cost_threshold=self.options.live_map_occupied_threshold)
+        return replace(opts, static_layer=static)
+
+    def _layer_options(self, rolling: bool) -> CostmapOptions:
         fp = tuple(self.profile.footprint)
         radius = self.profile.robot_radius if self.profile.robot_radius > 0 else 0.1
         infl = InflationOptions(
@@ -438,13 +452,13 @@ class Navigation:
             track_unknown_space=self.options.track_unknown_space,
         )
 
-    def _build_costmaps(self, grid: OccupancyGrid | None) -> None:
+    def _build_costmaps(self, grid: OccupancyGrid | None, live: bool = False) -> None:
         if grid is None:
             self._global = self._local = None
             self._global_cm = self._local_cm = None
             return
-        lo = replace(self._costmap_options(True), resolution=grid.resolution)
-        self._global = Costmap2D.from_map(grid, self._costmap_options(False))
+        lo = replace(self._costmap_options(True, live), resolution=grid.resolution)
+        self._global = Costmap2D.from_map(grid, self._costmap_options(False, live))
         self._global_cm = self._global.costmap()
         self._local = Costmap2D.rolling(lo, self.session.pose, grid)
         self._local_cm = self._local.costmap()
@@ -506,7 +520,7 @@ class Navigation:
         if m is None or not m.running or generation != m.generation:
             return  # stale: a map of a session that has ended
         old_local = self._local
-        self._build_costmaps(grid)
+        self._build_costmaps(grid, live=True)
         if old_local is not None and self._local is not None:
             self._local.keep_observations(old_local)
             self._local_cm = self._local.costmap()
