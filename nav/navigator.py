@@ -202,7 +202,6 @@ class Navigator:
         self._plan_reason = ""  # why the plan being waited for (or just computed) was asked for
         self.plans_kept = 0  # replans refused by the hysteresis (the current path was kept)
         self._last_cmd = ZERO_TWIST  # the command of the last tick (the stall check's)
-        self._forward_blocked = False  # the base's own obstacle stop holds forward motion now
 
     @classmethod
     def for_robot(
@@ -260,13 +259,6 @@ class Navigator:
         self._held = None
         if self._path is not None:
             new.set_path(self._path)
-
-    def set_forward_blocked(self, blocked: bool) -> None:
-        """The base refuses forward motion now (its own obstacle stop, ``SensorFrame.
-        base_stopped_by_obstacle``): handed to the controller at its next compute, so it turns or
-        reverses clear instead of commanding arcs the base cuts (a robot turning in place at a few
-        hundredths of rad/s until no-progress)."""
-        self._forward_blocked = blocked
 
     # -- requests ---------------------------------------------------------------------------------
     def set_goals(self, goals: Sequence[Pose2D]) -> None:
@@ -390,10 +382,6 @@ class Navigator:
             cmd, self._debug = held[1], held[2]
         else:
             self._held = None
-            # a controller without the hook (a test double) cannot use it; DWA and TEB have it
-            tell = getattr(self.controller, "set_forward_blocked", None)
-            if tell is not None:
-                tell(self._forward_blocked)
             try:
                 cmd, self._debug = self.controller.compute(pose, velocity, local)
             except PatienceExceeded as exc:

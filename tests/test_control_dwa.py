@@ -181,24 +181,6 @@ def test_heads_along_the_path_and_reports_debug() -> None:
     assert cmd.wz > 0
 
 
-def test_a_base_refusing_forward_motion_gets_a_turn_not_an_arc() -> None:
-    """The base's own obstacle stop (its forward IR sensors) cuts forward motion: a command with
-    vx > 0 would leave the robot turning at the arc's few hundredths of rad/s until no-progress."""
-    cm = inflate(room(), inscribed=0.1)
-    ctl = DwaController(DwaOptions(footprint=SKID_FOOTPRINT))  # forward only, as skid4's PreferForward
-    ctl.set_path(straight(1.0, 3.0, 5.0, 3.0))
-    pose, vel = Pose2D(1.0, 3.0, 0.4), Twist2D(0.2, 0.0, 0.0)  # driving, heading left of the path
-    free_cmd, _ = ctl.compute(pose, vel, cm)
-    assert free_cmd.vx > 0  # an arc back to the path
-    ctl.set_forward_blocked(True)
-    cmd, dbg = ctl.compute(pose, vel, cm)
-    assert np.all(dbg.twists[:, 0] <= 0.0)  # nothing the base would refuse is even sampled
-    assert cmd.vx <= 0.0 and cmd.wz < 0.0  # turns (right) towards the path instead
-    ctl.set_forward_blocked(False)
-    again, _ = ctl.compute(pose, vel, cm)
-    assert again.vx > 0
-
-
 def test_never_picks_a_colliding_trajectory() -> None:
     occ = box(room(), 1.45, 2.0, 1.6, 4.0)  # wall 0.3 m ahead of the robot's nose
     cm = inflate(occ, inscribed=0.1)

@@ -790,7 +790,6 @@ class Navigation:
             self._tick_recovery(now)
             return
         self._collect_plans()
-        self.navigator.set_forward_blocked(frame.base_stopped_by_obstacle)
         tick = self.navigator.tick(now, session.pose, session.velocity, self._global_cm, self._local_cm)
         if tick.outcome is None and tick.state in TERMINAL and self.navigator.outcome is not None:
             # a plan failure delivered before the tick ends the request without a fresh NavTick

@@ -113,13 +113,6 @@ class DwaController:
         self._local_span = (0, 0)  # path slice of the last local path
         self._length_key: tuple[int, ...] | None = None  # (slice, size) of _length; None after set_path
         self._length = 0.0
-        self._forward_blocked = False
-
-    def set_forward_blocked(self, blocked: bool) -> None:
-        """The base's own obstacle stop (its forward IR sensors) cuts forward motion now: sample only
-        twists it will carry out (turn in place, reverse), so the robot turns clear of what the
-        sensors see instead of commanding arcs the base refuses, standing still until no-progress."""
-        self._forward_blocked = blocked
 
     # -- path -------------------------------------------------------------------------------------
     def set_path(self, path: Path) -> None:
@@ -213,7 +206,7 @@ class DwaController:
         span = (*self._local_span, len(local_path))
         if self._length_key != span:
             self._length_key, self._length = span, polyline_length(local_path)
-        trajs: TrajectorySet = generate(o, pose, velocity, forward=not self._forward_blocked)
+        trajs: TrajectorySet = generate(o, pose, velocity)
         window = CostWindow.around(costmap, trajs.poses, o.circumscribed_radius, o.unknown_is_lethal)
         ctx = CriticContext(
             options=o,

@@ -267,12 +267,6 @@ class TebController:
         self.last_debug: TebDebug | None = None
         self._walkers = np.zeros((0, 2))  # walkers' centres now (map frame)
         self._walker_vel = np.zeros((0, 2))  # and their velocities, m/s
-        self._forward_blocked = False
-
-    def set_forward_blocked(self, blocked: bool) -> None:
-        """The base's own obstacle stop cuts forward motion now: the command keeps the band's turn
-        and reverse parts only (see ``DwaController.set_forward_blocked``)."""
-        self._forward_blocked = blocked
 
     def set_walkers(self, centres: np.ndarray, velocities: np.ndarray) -> None:
         """Walkers (map frame, (W, 2) centres now and velocities) for the next ``compute`` calls:
@@ -604,8 +598,6 @@ class TebController:
         dv = o.control_period * np.array([o.acc_lim_x, o.acc_lim_y if o.holonomic else 0.0, o.acc_lim_theta])
         lo = np.maximum(v0 - dv, [-o.max_vel_x_backwards, -o.max_vel_y, -o.max_vel_theta])
         hi = np.minimum(v0 + dv, [o.max_vel_x, o.max_vel_y, o.max_vel_theta])
-        if self._forward_blocked:
-            hi[0] = min(hi[0], 0.0)
         out = np.clip([vx, vy, wz], np.minimum(lo, hi), np.maximum(lo, hi))
         cmd = Twist2D(float(out[0]), float(out[1]) if o.holonomic else 0.0, float(out[2]))
         return cmd, debug

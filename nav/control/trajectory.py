@@ -55,14 +55,12 @@ def window_1d(
     return np.array(vals)
 
 
-def sample_twists(options: DwaOptions, velocity: Twist2D, forward: bool = True) -> np.ndarray:
+def sample_twists(options: DwaOptions, velocity: Twist2D) -> np.ndarray:
     """(K, 3) twists (vx, vy, wz): the grid over the dynamic window, filtered like DWB's
-    ``XYThetaIterator::isValidSpeed`` (max_speed_xy, min_speed_xy/min_speed_theta, not all zero).
-    ``forward`` False: no sample drives forward (vx <= 0; the base refuses forward motion now)."""
+    ``XYThetaIterator::isValidSpeed`` (max_speed_xy, min_speed_xy/min_speed_theta, not all zero)."""
     o = options
     dt = o.sim_period
-    max_vx = o.max_vel_x if forward else min(o.max_vel_x, 0.0)
-    vx = window_1d(velocity.vx, o.min_vel_x, max_vx, o.acc_lim_x, o.decel_lim_x, dt, o.vx_samples)
+    vx = window_1d(velocity.vx, o.min_vel_x, o.max_vel_x, o.acc_lim_x, o.decel_lim_x, dt, o.vx_samples)
     if o.holonomic and (o.max_vel_y > o.min_vel_y):
         vy = window_1d(velocity.vy, o.min_vel_y, o.max_vel_y, o.acc_lim_y, o.decel_lim_y, dt, o.vy_samples)
     else:
@@ -218,9 +216,8 @@ class TrajectorySet:
         return int(self.twists.shape[0])
 
 
-def generate(options: DwaOptions, pose: Pose2D, velocity: Twist2D, forward: bool = True) -> TrajectorySet:
-    """Sample the dynamic window around ``velocity`` (no forward samples unless ``forward``) and
-    simulate every sample from ``pose``."""
-    twists = sample_twists(options, velocity, forward)
+def generate(options: DwaOptions, pose: Pose2D, velocity: Twist2D) -> TrajectorySet:
+    """Sample the dynamic window around ``velocity`` and simulate every sample from ``pose``."""
+    twists = sample_twists(options, velocity)
     times = time_steps(options, twists)
     return TrajectorySet(twists, times, *_simulate(pose, twists, times))
