@@ -30,6 +30,9 @@ offset) within 300 s; collisions counted.
 from __future__ import annotations
 
 import math
+import os
+import sys
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -263,10 +266,26 @@ def _toward(nav, explorer, target: Pose2D, pose: Pose2D, onward) -> Pose2D | Non
     return None if best is None else Pose2D(best[0], best[1], target.theta)
 
 
-def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float = 300.0) -> dict[str, float]:
+def _print_goal(i: int, goal: Pose2D, reached: bool, sim_s: float, collisions: int) -> None:
+    mark = "ok " if reached else "MISS"
+    print(
+        f"  {mark} goal {i} ({goal.x:.2f}, {goal.y:.2f}) at {sim_s:.1f} s simulated, "
+        f"{collisions} collision ticks",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def navigate_while_mapping(
+    n_goals: int = 20,
+    seed: int = 0,
+    per_goal_s: float = 300.0,
+    on_goal: Callable[[int, Pose2D, bool, float, int], None] | None = _print_goal,
+) -> dict[str, float]:
     """Office, mapping from the corridor: goals drawn in its free space, reached by clicking towards
     each on the growing map (``_toward``) until it is known, then on it. Reached: the robot's true
-    position within 0.35 m of the goal (the goal checker's 0.25 m plus the SLAM map's drift)."""
+    position within 0.35 m of the goal (the goal checker's 0.25 m plus the SLAM map's drift).
+    ``on_goal(index, goal, reached, simulated s so far, collision ticks so far)`` after each goal."""
     world = load_world("office")
     radius = load_profile("skid4").circumscribed_radius
     passable = np.where(world.clearance_map >= radius, 0, 254).astype(np.uint8)
@@ -280,7 +299,7 @@ def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float =
         while not nav.mapping_live():
             s.run_for(s.period)
         goals = _unexplored_goals(world, OFFICE_START, n_goals, seed, clearance=0.45)
-        for g in goals:
+        for i, g in enumerate(goals):
             target = g.relative_to(start_truth)  # the map frame starts at the true start pose
             to_goal = distance_field(Costmap(world.geometry, passable), g, cost_travel_multiplier=0.0)
             # a map cell near a wall may lie just off the truth's passable cells: look 0.3 m around
@@ -316,10 +335,11 @@ def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float =
                 if kind == "failed":
                     edges.mark_failed((click.x, click.y))
             truth = stack.driver.truth_pose
-            if truth.distance_to(g) <= 0.35:
-                reached += 1
-            else:
-                failed_goals += 1
+            ok = truth.distance_to(g) <= 0.35
+            reached += ok
+            failed_goals += not ok
+            if on_goal is not None:
+                on_goal(i, g, ok, s.clock.now() - sim0, s.collisions)
         return {
             "goals": float(len(goals)),
             "reached": float(reached),
@@ -331,8 +351,12 @@ def navigate_while_mapping(n_goals: int = 20, seed: int = 0, per_goal_s: float =
         s.close()
 
 
+GOALS_VAR = "NAVDECK_NWM_GOALS"
+"""Goals of ``explore.navigate_while_mapping`` (default 50, the issue's N)."""
+
+
 def _navigate_while_mapping() -> list[Figure]:
-    r = navigate_while_mapping()
+    r = navigate_while_mapping(n_goals=int(os.environ.get(GOALS_VAR, "50")))
     n = int(r["goals"])
     rate = r["reached"] / n if n else 0.0
     return [
