@@ -29,14 +29,17 @@ offset) within 300 s; collisions counted.
 
 from __future__ import annotations
 
+import json
 import math
 import os
 import sys
-from collections.abc import Callable
+import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
-from scipy import ndimage
+from scipy import ndimage, sparse
 
 from app.commands.explore import ExploreConfig, build_explore_stack, load_world, random_start, run_explore
 from bench.core import Benchmark, Figure
@@ -44,6 +47,7 @@ from bench.ghost import FREE_MAX, _world_free_and_exterior
 from nav.exploration import FrontierExplorer, distance_field
 from nav.types import INSCRIBED_INFLATED_OBSTACLE, Costmap, OccupancyGrid, Pose2D
 from robot.profiles import load_profile
+from robot.sim.worldgen import FAMILIES as WORLD_FAMILIES
 
 OCCUPIED_MIN = 65
 
@@ -106,15 +110,28 @@ def compare(built: OccupancyGrid, world, map_in_world: Pose2D, start: Pose2D) ->
     )
 
 
-def tour_lower_bound_s(
-    world, start: Pose2D, profile: str = "skid4", stride: float = 0.2, beams: int = 360
-) -> float:
-    """Seconds any exploration needs at least (module docstring): every free cell the lidar can see
-    from somewhere must be seen, so the robot must at least reach, at ``max_vel_x``, a place from
-    which the last of them is in sight. Candidate places: passable cells (the circumscribed radius
-    clear of walls) every ``stride`` m; sight: the simulator's ray caster, ``beams`` rays up to the
-    lidar's range. Places are taken in order of travel distance from the start (one Dijkstra field);
-    the distance at which the last visible free cell is first seen is the bound."""
+@dataclass(frozen=True)
+class Sight:
+    """What the lidar can see of the reachable free area, and from where (the tour figures' input).
+
+    Candidate places are the passable cells (the circumscribed radius clear of walls) every
+    ``stride`` m that the robot can reach from the start; sight is the simulator's ray caster,
+    ``beams`` rays up to the lidar's range, all round (the robot can turn on the spot)."""
+
+    views: np.ndarray
+    """(V, 2) world x, y of the candidate places, in order of travel from the start."""
+    travel: np.ndarray
+    """(V,) shortest travel (m) from the start to each place over the passable cells."""
+    sees: sparse.csr_matrix
+    """(V, N) bool: place v sees target cell n (the reachable free cells, row-major order)."""
+    passable: np.ndarray
+    """(H, W) bool over the world: cells the robot's centre may occupy."""
+    max_vel_x: float
+
+
+def sight(world, start: Pose2D, profile: str = "skid4", stride: float = 0.2, beams: int = 360) -> Sight:
+    """The candidate places and what each sees (class docstring). Vectorized per chunk of places;
+    the one loop is over chunks."""
     prof = load_profile(profile)
     wg = world.geometry
     res = wg.resolution
@@ -127,12 +144,14 @@ def tour_lower_bound_s(
     rows, cols = np.nonzero(sub & np.isfinite(dist))
     order = np.argsort(dist[rows, cols], kind="stable")
     rows, cols = rows[order], cols[order]
-    d_view = dist[rows, cols]
     views = wg.cell_to_world(rows, cols)
     target = reachable_free(world, start)
-    first_seen = np.full(target.shape, np.inf)
+    index = np.full(target.shape, -1, dtype=np.int64)
+    index[target] = np.arange(int(np.count_nonzero(target)))
+    n = int(np.count_nonzero(target))
     angles = np.linspace(-math.pi, math.pi, beams, endpoint=False)
     steps = np.arange(0.0, prof.lidar.range_max, res)
+    chunks: list[np.ndarray] = []
     for a in range(0, len(views), 32):
         v = views[a : a + 32]
         ranges = world.raycaster.cast(v, np.broadcast_to(angles, (len(v), beams)), prof.lidar.range_max)
@@ -142,27 +161,176 @@ def tour_lower_bound_s(
         pts = v[vi] + steps[si, None] * np.column_stack((np.cos(angles[bi]), np.sin(angles[bi])))
         pr, pc = wg.world_to_cell(pts)
         ok = wg.in_bounds(pr, pc)
-        # views come in increasing distance: a cell keeps the first (smallest) distance it got
-        np.minimum.at(first_seen, (pr[ok], pc[ok]), d_view[a + vi[ok]])
-    seen = first_seen[target]
-    seen = seen[np.isfinite(seen)]
-    return float(seen.max()) / prof.limits.max_vel_x if seen.size else 0.0
+        cell = index[pr[ok], pc[ok]]
+        hit = cell >= 0
+        chunks.append(np.unique((a + vi[ok][hit]) * n + cell[hit]))
+    keys = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.int64)
+    sees = sparse.csr_matrix(
+        (np.ones(keys.size, dtype=bool), (keys // max(n, 1), keys % max(n, 1))), shape=(len(views), n)
+    )
+    return Sight(views, dist[rows, cols], sees, passable, prof.limits.max_vel_x)
+
+
+def tour_lower_bound_s(s: Sight) -> float:
+    """Seconds any exploration needs at least (module docstring): every free cell the lidar can see
+    from somewhere must be seen, so the robot must at least reach, at ``max_vel_x``, a place from
+    which the last of them is in sight. Places are taken in order of travel from the start; the
+    distance at which the last visible free cell is first seen is the bound (one way, no turning)."""
+    coo = s.sees.tocoo()
+    if coo.nnz == 0:
+        return 0.0
+    first_seen = np.full(s.sees.shape[1], np.inf)
+    np.minimum.at(first_seen, coo.col, s.travel[coo.row])
+    seen = first_seen[np.isfinite(first_seen)]
+    return float(seen.max()) / s.max_vel_x
+
+
+@dataclass(frozen=True)
+class Tour:
+    """A tour from the start through places that together see every visible reachable free cell."""
+
+    places: np.ndarray
+    """(K, 2) world x, y in the order visited."""
+    length_m: float
+    seconds: float
+    """``length_m`` at ``max_vel_x`` (no turning, no acceleration)."""
+
+
+def greedy_tour(world, start: Pose2D, s: Sight) -> Tour:
+    """A watchman tour by the usual two steps: greedy set cover (the place that sees most of the
+    still unseen cells, until every visible cell is seen), then an open path from the start through
+    those places (nearest neighbour, improved by 2-opt) over shortest-path travel distances.
+
+    It is a feasible tour, not the optimum: the shortest tour that sees everything (with the same
+    sight and no turning) is no longer than it; ``tour_lower_bound_s`` bounds it from below."""
+    sees = s.sees.tocsc().astype(np.float32).tocsr()
+    unseen = np.asarray(sees.sum(axis=0)).ravel() > 0  # only cells some place sees
+    chosen: list[int] = []
+    while unseen.any():
+        gain = sees @ unseen.astype(np.float32)
+        v = int(np.argmax(gain))
+        if gain[v] <= 0:
+            break
+        chosen.append(v)
+        unseen[sees.indices[sees.indptr[v] : sees.indptr[v + 1]]] = False
+    if not chosen:
+        return Tour(np.zeros((0, 2)), 0.0, 0.0)
+    wg = world.geometry
+    costs = Costmap(wg, np.where(s.passable, 0, 254).astype(np.uint8))
+    places = s.views[chosen]
+    nodes = [start, *(Pose2D(float(x), float(y), 0.0) for x, y in places)]
+    rows, cols = wg.world_to_cell(np.array([[p.x, p.y] for p in nodes]))
+    d = np.empty((len(nodes), len(nodes)))
+    for i, p in enumerate(nodes):  # one Dijkstra field per place (tens)
+        d[i] = distance_field(costs, p, cost_travel_multiplier=0.0)[rows, cols]
+    d = np.minimum(d, d.T)  # the grid search is symmetric up to ties
+    order = _nearest_neighbour_path(d)
+    order = _two_opt_path(d, order)
+    length = float(d[order[:-1], order[1:]].sum())
+    return Tour(places[np.asarray(order[1:]) - 1], length, length / s.max_vel_x)
+
+
+def _nearest_neighbour_path(d: np.ndarray) -> list[int]:
+    """An open path from node 0 through every node, always to the nearest one not visited."""
+    left = np.ones(len(d), dtype=bool)
+    left[0] = False
+    order = [0]
+    while left.any():
+        row = np.where(left, d[order[-1]], np.inf)
+        nxt = int(np.argmin(row))
+        order.append(nxt)
+        left[nxt] = False
+    return order
+
+
+def _two_opt_path(d: np.ndarray, order: list[int]) -> list[int]:
+    """2-opt on an open path with a fixed first node: reverse ``order[i:j+1]`` while that shortens
+    it (the last node is free, so a reversal up to the end changes one edge only)."""
+    o = np.asarray(order)
+    n = len(o)
+    improved = True
+    while improved:
+        improved = False
+        for i in range(1, n - 1):
+            j = np.arange(i + 1, n)
+            before = d[o[i - 1], o[i]] + np.where(j + 1 < n, d[o[j], o[np.minimum(j + 1, n - 1)]], 0.0)
+            after = d[o[i - 1], o[j]] + np.where(j + 1 < n, d[o[i], o[np.minimum(j + 1, n - 1)]], 0.0)
+            gain = before - after
+            k = int(np.argmax(gain))
+            if gain[k] > 1e-9:
+                o[i : j[k] + 1] = o[i : j[k] + 1][::-1].copy()
+                improved = True
+    return o.tolist()
 
 
 STOCK = ("apartment", "office", "greenhouse")
-FAMILY_SEEDS = {"apartment": range(0, 4), "office": range(0, 2)}
-"""Generated worlds per family in the default run (each is minutes of simulated exploring on the
-2-core machine); ``run_family`` takes any range."""
+FAMILIES = ("apartment", "office")
+
+
+@dataclass(frozen=True)
+class FamilyConfig:
+    """``explore.family`` from the environment (``NAVDECK_EXPLORE_*``; see docs/benchmarks.md)."""
+
+    trials: int = 25
+    """Generated worlds per family (``NAVDECK_EXPLORE_TRIALS``): 25 apartments + 25 offices = 50."""
+    families: tuple[str, ...] = FAMILIES
+    """``NAVDECK_EXPLORE_FAMILIES``, comma-separated worldgen family names."""
+    first_seed: int = 0
+    """``NAVDECK_EXPLORE_SEED0``: seeds ``first_seed .. first_seed + trials - 1`` (world and start)."""
+    budget_s: float = math.inf
+    """``NAVDECK_EXPLORE_BUDGET_S``: wall seconds after which no new trial starts (the one running
+    finishes); the figures say how many trials ran."""
+    timeout_s: float = 1800.0
+    """``NAVDECK_EXPLORE_TIMEOUT_S``: simulated seconds one exploration may take."""
+    log: str | None = None
+    """``NAVDECK_EXPLORE_LOG``: a JSONL file each trial's result is appended to as it ends."""
+
+    @classmethod
+    def from_env(cls, env: Mapping[str, str]) -> FamilyConfig:
+        def num(name: str, default: float, kind: type = float) -> Any:
+            raw = env.get(name, "").strip()
+            if not raw:
+                return default
+            try:
+                value = kind(raw)
+            except ValueError:
+                raise ValueError(f"{name}={raw!r} is not a number") from None
+            if not (value > 0 or (name == "NAVDECK_EXPLORE_SEED0" and value >= 0)):
+                raise ValueError(f"{name}={raw!r} must be positive")
+            return value
+
+        names = tuple(f.strip() for f in env.get("NAVDECK_EXPLORE_FAMILIES", "").split(",") if f.strip())
+        unknown = [f for f in names if f not in WORLD_FAMILIES]
+        if unknown:
+            raise ValueError(
+                f"NAVDECK_EXPLORE_FAMILIES: unknown {unknown}; one of {', '.join(WORLD_FAMILIES)}"
+            )
+        return cls(
+            trials=num("NAVDECK_EXPLORE_TRIALS", cls.trials, int),
+            families=names or FAMILIES,
+            first_seed=num("NAVDECK_EXPLORE_SEED0", cls.first_seed, int),
+            budget_s=num("NAVDECK_EXPLORE_BUDGET_S", cls.budget_s),
+            timeout_s=num("NAVDECK_EXPLORE_TIMEOUT_S", cls.timeout_s),
+            log=env.get("NAVDECK_EXPLORE_LOG") or None,
+        )
+
+    def worlds(self) -> list[tuple[str, int]]:
+        """(family, seed) in the order run: families interleaved, so a budget cut leaves each with
+        about as many trials."""
+        return [(f, s) for s in range(self.first_seed, self.first_seed + self.trials) for f in self.families]
 
 
 def run_one(world_spec: str, seed: int, timeout: float = 1800.0) -> dict[str, float]:
+    """One exploration of ``world_spec`` from the start drawn from ``seed``, with its tour figures."""
     world = load_world(world_spec)
     start = random_start(world, "skid4", seed)
     res = run_explore(
         ExploreConfig(world=world_spec, start=(start.x, start.y, start.theta), seed=seed, timeout=timeout),
         world,
     )
-    bound = tour_lower_bound_s(world, start)
+    seen = sight(world, start)
+    bound = tour_lower_bound_s(seen)
+    tour = greedy_tour(world, start, seen)
     return {
         "explored_pct": res.explored_pct,
         "agreement_pct": res.map_agreement_pct,
@@ -170,7 +338,12 @@ def run_one(world_spec: str, seed: int, timeout: float = 1800.0) -> dict[str, fl
         "time_s": res.time_s,
         "bound_s": bound,
         "ratio": res.time_s / bound if bound > 0 else math.inf,
+        "tour_s": tour.seconds,
+        "tour_places": float(len(tour.places)),
+        "tour_ratio": res.time_s / tour.seconds if tour.seconds > 0 else math.inf,
         "complete": float(res.state == "complete"),
+        "goals_sent": float(res.goals_sent),
+        "goals_failed": float(res.goals_failed),
         "path_m": res.path_length_m,
         "wall_s": res.wall_s,
     }
@@ -178,47 +351,83 @@ def run_one(world_spec: str, seed: int, timeout: float = 1800.0) -> dict[str, fl
 
 def _family_figures(name: str, runs: list[dict[str, float]]) -> list[Figure]:
     n = len(runs)
+    if n == 0:
+        return [Figure(f"{name}: trials run", 0.0, "", ">= 1", False)]
     explored = np.array([r["explored_pct"] for r in runs])
     agree = np.array([r["agreement_pct"] for r in runs])
-    coll = sum(r["collisions"] for r in runs)
+    coll = np.array([r["collisions"] for r in runs])
     ratio = np.array([r["ratio"] for r in runs])
+    tour_ratio = np.array([r["tour_ratio"] for r in runs])
+    time_s = np.array([r["time_s"] for r in runs])
     return [
+        Figure(f"{name} (N={n}): explored, mean", float(explored.mean()), "%"),
         Figure(
-            f"{name} (N={n}): explored, mean",
-            float(explored.mean()),
+            f"{name} (N={n}): explored, worst",
+            float(explored.min()),
             "%",
             ">= 95",
             bool(explored.min() >= 95),
         ),
-        Figure(f"{name} (N={n}): explored, worst", float(explored.min()), "%"),
+        Figure(f"{name} (N={n}): runs explored >= 95 %", float(np.count_nonzero(explored >= 95)), "runs"),
+        Figure(f"{name} (N={n}): map agreement, mean", float(agree.mean()), "%"),
         Figure(
             f"{name} (N={n}): map agreement, worst", float(agree.min()), "%", ">= 98", bool(agree.min() >= 98)
         ),
-        Figure(f"{name} (N={n}): collisions", float(coll), "", "0", coll == 0),
+        Figure(
+            f"{name} (N={n}): runs with a collision",
+            float(np.count_nonzero(coll)),
+            "runs",
+            "0",
+            not coll.any(),
+        ),
+        Figure(f"{name} (N={n}): control ticks in contact, total", float(coll.sum()), "ticks"),
         Figure(
             f"{name} (N={n}): ended with no reachable frontier",
             float(sum(r["complete"] for r in runs)),
             "runs",
         ),
-        Figure(f"{name} (N={n}): time, mean", float(np.mean([r["time_s"] for r in runs])), "s"),
-        Figure(f"{name} (N={n}): time / lower bound, median", float(np.median(ratio)), "x"),
+        Figure(f"{name} (N={n}): time, median", float(np.median(time_s)), "s"),
+        Figure(f"{name} (N={n}): time, worst", float(time_s.max()), "s"),
+        Figure(f"{name} (N={n}): time / greedy watchman tour, median", float(np.median(tour_ratio)), "x"),
+        Figure(f"{name} (N={n}): time / tour lower bound, median", float(np.median(ratio)), "x"),
     ]
 
 
-def run_family(family: str, seeds: range) -> list[Figure]:
-    return _family_figures(f"generated {family}", [run_one(f"{family}:{s}", s) for s in seeds])
+def run_family(cfg: FamilyConfig, clock: Callable[[], float] = time.monotonic) -> dict[str, list[dict]]:
+    """Explore one new generated world per trial (``cfg.worlds()``) until done or the wall budget is
+    spent; each result is printed (and appended to ``cfg.log``) as it ends."""
+    runs: dict[str, list[dict]] = {f: [] for f in cfg.families}
+    t0 = clock()
+    for family, seed in cfg.worlds():
+        if clock() - t0 >= cfg.budget_s:
+            print(f"  explore.family: wall budget of {cfg.budget_s:g} s spent, trials stop here")
+            break
+        r = run_one(f"{family}:{seed}", seed, timeout=cfg.timeout_s)
+        runs[family].append(r)
+        line = {"world": f"{family}:{seed}", **{k: round(v, 3) for k, v in r.items()}}
+        print(f"  {json.dumps(line)}", flush=True)
+        if cfg.log:
+            with open(cfg.log, "a") as fh:
+                fh.write(json.dumps(line) + "\n")
+    return runs
 
 
 def _explore() -> list[Figure]:
     out: list[Figure] = []
     for name in STOCK:
         out.extend(_family_figures(f"stock {name}", [run_one(name, 0)]))
-    for family, seeds in FAMILY_SEEDS.items():
-        out.extend(run_family(family, seeds))
     return out
 
 
-BENCHMARKS = [Benchmark(name="explore", run=_explore, group="slow")]
+def _explore_family() -> list[Figure]:
+    runs = run_family(FamilyConfig.from_env(os.environ))
+    return [fig for family, rs in runs.items() for fig in _family_figures(f"generated {family}", rs)]
+
+
+BENCHMARKS = [
+    Benchmark(name="explore", run=_explore, group="slow"),
+    Benchmark(name="explore.family", run=_explore_family, group="slow"),
+]
 
 
 # --------------------------------------------------------------------------- navigate while mapping

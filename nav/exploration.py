@@ -187,13 +187,12 @@ class FrontierExplorer:
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         keep = np.nonzero(sizes * res >= o.min_frontier_size)[0] + 1
         reach_cells = max(1, math.ceil(o.goal_reach / res))
-        disk = _disk(reach_cells)
         objects = ndimage.find_objects(labels)
         frontiers: list[Frontier] = []
         for lab in keep:
             sl = objects[lab - 1]
             assert sl is not None
-            # a window around the frontier grown by the reach: dilation stays inside it
+            # a window around the frontier grown by the reach: the disk around it stays inside
             r0, r1 = max(sl[0].start - reach_cells, 0), min(sl[0].stop + reach_cells, geo.height)
             c0, c1 = max(sl[1].start - reach_cells, 0), min(sl[1].stop + reach_cells, geo.width)
             own = labels[r0:r1, c0:c1] == lab
@@ -201,14 +200,16 @@ class FrontierExplorer:
             cells = geo.cell_to_world(rows + r0, cols + c0)
             d_win = dist[r0:r1, c0:c1]
             low = costmap.costs[r0:r1, c0:c1] <= o.goal_max_cost
-            near = ndimage.binary_dilation(own, structure=disk)
             # the frontier's own cells, else cells within reach; low-cost cells first in each
-            for region in (own & low, own, near & low, near):
-                on = np.where(region, d_win, np.inf)
-                if np.isfinite(on).any():
-                    break
+            on = _first_reachable(d_win, (own & low, own))
+            if on is None:
+                # Only now the disk around the frontier (a Euclidean distance transform of the
+                # window: a dilation by a 25 x 25 disk for every frontier took a fifth of the CPU
+                # of exploring the office).
+                near = ndimage.distance_transform_edt(~own) <= reach_cells
+                on = _first_reachable(d_win, (near & low, near))
             goal, travel = None, math.inf
-            if np.isfinite(on).any():
+            if on is not None:
                 i = int(np.argmin(on))
                 gr, gc = divmod(i, on.shape[1])
                 travel = float(on[gr, gc])
@@ -234,9 +235,13 @@ class FrontierExplorer:
         return FrontierReport(frontiers, chosen, int(np.count_nonzero(mask)), free_area, skipped, here)
 
 
-def _disk(radius_cells: int) -> np.ndarray:
-    k = np.arange(-radius_cells, radius_cells + 1)
-    return (k[:, None] ** 2 + k[None, :] ** 2) <= radius_cells * radius_cells
+def _first_reachable(dist: np.ndarray, regions: tuple[np.ndarray, ...]) -> np.ndarray | None:
+    """``dist`` inside the first of ``regions`` that holds a reachable cell (inf elsewhere)."""
+    for region in regions:
+        on = np.where(region, dist, np.inf)
+        if np.isfinite(on).any():
+            return on
+    return None
 
 
 def goal_pose(goal: tuple[float, float], robot: Pose2D) -> Pose2D:
