@@ -1,0 +1,122 @@
+"""The exploration benchmark's own parts (issue 18): what the lidar sees from where, the watchman
+tour the exploration time is compared with, and the family mode's settings and wall budget."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import bench.explore as bx
+from nav.types import Pose2D
+from robot.sim import World
+
+START = Pose2D(1.5, 1.5, 0.0)
+
+
+def _two_rooms() -> World:
+    """12 x 8 m, a wall across at x = 6 from the floor to y = 6: the rooms meet only by the 2 m gap
+    at the top, so nothing of the right room's lower half is in sight from the left room."""
+    world = World.box(12.0, 8.0)
+    world.add_polygon([(5.9, 0.0), (6.1, 0.0), (6.1, 6.0), (5.9, 6.0)])
+    return world
+
+
+@pytest.fixture(scope="module")
+def rooms():
+    world = _two_rooms()
+    return world, bx.sight(world, START, stride=0.4, beams=180)
+
+
+def test_places_are_in_order_of_travel_and_see_the_reachable_free_area(rooms):
+    world, s = rooms
+    assert np.all(np.diff(s.travel) >= 0)
+    assert s.sees.shape == (len(s.views), int(np.count_nonzero(bx.reachable_free(world, START))))
+    seen = np.asarray(s.sees.sum(axis=0)).ravel() > 0
+    assert seen.mean() > 0.9  # walls hide only slivers from every place together
+
+
+def test_the_tour_sees_every_cell_some_place_sees(rooms):
+    world, s = rooms
+    tour = bx.greedy_tour(world, START, s)
+    rows = [int(np.flatnonzero(np.all(s.views == p, axis=1))[0]) for p in tour.places]
+    covered = np.asarray(s.sees[rows].sum(axis=0)).ravel() > 0
+    visible = np.asarray(s.sees.sum(axis=0)).ravel() > 0
+    assert np.array_equal(covered, visible)
+    assert (tour.places[:, 0] > 6.1).any() and (tour.places[:, 1] < 5.0).any()
+
+
+def test_the_tour_is_no_faster_than_the_lower_bound_and_goes_round_the_wall(rooms):
+    world, s = rooms
+    tour = bx.greedy_tour(world, START, s)
+    bound = bx.tour_lower_bound_s(s)
+    assert bound > 0
+    assert tour.seconds >= bound
+    # the right room's lower half is seen only past the gap: at least the way up to it and back down
+    assert tour.length_m >= (6.0 - START.y) + 2.0
+    assert tour.seconds == pytest.approx(tour.length_m / s.max_vel_x)
+
+
+def test_two_opt_undoes_a_nearest_neighbour_detour():
+    x = np.array([0.0, 1.0, -1.5, 4.0])  # from 0, nearest first: 1, then -1.5, then 4: 9 m
+    d = np.abs(x[:, None] - x[None, :])
+    nn = bx._nearest_neighbour_path(d)
+    assert nn == [0, 1, 2, 3]
+    best = bx._two_opt_path(d, nn)
+    assert best[0] == 0 and sorted(best) == [0, 1, 2, 3]
+    assert d[best[:-1], best[1:]].sum() == pytest.approx(7.0)  # -1.5 first, then out to 4
+
+
+def test_family_defaults_are_fifty_worlds_families_interleaved():
+    cfg = bx.FamilyConfig.from_env({})
+    worlds = cfg.worlds()
+    assert len(worlds) == 50 and worlds[:3] == [("apartment", 0), ("office", 0), ("apartment", 1)]
+    assert cfg.budget_s == float("inf") and cfg.log is None
+
+
+def test_family_settings_come_from_the_environment():
+    cfg = bx.FamilyConfig.from_env(
+        {
+            "NAVDECK_EXPLORE_TRIALS": "3",
+            "NAVDECK_EXPLORE_FAMILIES": "office",
+            "NAVDECK_EXPLORE_SEED0": "0",
+            "NAVDECK_EXPLORE_BUDGET_S": "600",
+            "NAVDECK_EXPLORE_TIMEOUT_S": "900",
+        }
+    )
+    assert cfg.worlds() == [("office", 0), ("office", 1), ("office", 2)]
+    assert (cfg.budget_s, cfg.timeout_s) == (600.0, 900.0)
+    cfg = bx.FamilyConfig.from_env({"NAVDECK_EXPLORE_TRIALS": "2", "NAVDECK_EXPLORE_SEED0": "10"})
+    assert cfg.worlds()[-1] == ("office", 11)
+
+
+@pytest.mark.parametrize(
+    ("name", "value", "match"),
+    [
+        ("NAVDECK_EXPLORE_TRIALS", "many", "not a number"),
+        ("NAVDECK_EXPLORE_TRIALS", "0", "must be positive"),
+        ("NAVDECK_EXPLORE_BUDGET_S", "-5", "must be positive"),
+        ("NAVDECK_EXPLORE_FAMILIES", "apartment,castle", "unknown"),
+    ],
+)
+def test_bad_family_settings_are_refused_by_name(name, value, match):
+    with pytest.raises(ValueError, match=match) as err:
+        bx.FamilyConfig.from_env({name: value})
+    assert name in str(err.value)
+
+
+def test_no_trial_starts_once_the_wall_budget_is_spent(monkeypatch, tmp_path):
+    # run_one is minutes of simulated exploring per world: here only the budget's bookkeeping runs
+    ran: list[tuple[str, int]] = []
+
+    def one(spec: str, seed: int, timeout: float) -> dict[str, float]:
+        ran.append((spec, seed))
+        return {"explored_pct": 96.0, "time_s": 100.0}
+
+    monkeypatch.setattr(bx, "run_one", one)
+    now = iter([0.0, 0.0, 40.0, 80.0, 120.0])  # wall clock before each trial
+    log = tmp_path / "trials.jsonl"
+    cfg = bx.FamilyConfig(trials=5, budget_s=100.0, log=str(log))
+    runs = bx.run_family(cfg, clock=lambda: next(now))
+    assert ran == [("apartment:0", 0), ("office:0", 0), ("apartment:1", 1)]
+    assert [len(v) for v in runs.values()] == [2, 1]
+    assert len(log.read_text().splitlines()) == 3
