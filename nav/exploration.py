@@ -53,10 +53,13 @@ class FrontierOptions:
     the robot goes to the nearest traversable cell within this distance (m), from where its lidar
     sees past the frontier."""
     blacklist_radius: float = 0.5
-    min_goal_distance: float = 0.4
+    min_goal_distance: float = 0.5
     """A frontier whose goal is this close to the robot stays unseen from where the robot stands
     (under furniture, in a sensor shadow): it is not chosen, and ``FrontierReport.unobservable``
-    lists it for the caller to blacklist (the goal checker's 0.25 m plus a margin)."""
+    lists it for the caller to blacklist. The explorer also takes a goal as reached once the robot
+    is this close (the lidar sees the frontier from there). Nav2's progress checker radius
+    (``required_movement_radius`` 0.5 m): inside it the last turns and creeping onto the goal count
+    as no progress, and that is where frontier goals near furniture ended in ``NoProgress``."""
     goal_max_cost: int = 100
     """Goal cells are taken among those with a cost up to this when the frontier has any (away from
     the steep part of the inflation, where a controller may fail to settle), else among all
