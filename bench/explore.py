@@ -1,8 +1,10 @@
 """Exploration (issue 18): explore stock and generated worlds from a random start with one click,
 and send goals into unexplored parts of the office while mapping.
 
-``explore``: ``navdeck explore`` on each stock world and on generated apartments and offices
-(``robot/sim/worldgen``), each from a random start drawn from its seed. Figures per family:
+``explore``: ``navdeck explore`` on each stock world from the start drawn from seed 0.
+``explore.family``: one new generated world per trial (``apartment:SEED``, ``office:SEED``,
+``robot/sim/worldgen``), each from the start drawn from its seed; how many, which families and a
+wall-time budget come from ``NAVDECK_EXPLORE_*`` (``FamilyConfig``). Figures per family:
 - explored: of the *reachable free area* -- the world's free cells in the free region that holds
   the start (cells under tables and behind chair legs included: a lidar sees most of them) -- the
   share the built map knows as free (map_saver ``free_thresh``), compared in the world frame through
@@ -10,12 +12,14 @@ and send goals into unexplored parts of the office while mapping.
 - map agreement: known cells of the built map whose class agrees with the world: a free cell
   (<= 25) where the world is free inside its outer walls, an occupied cell (>= 65) within one cell
   of a world wall (the map's registration error); cells in between are not counted;
-- collisions; time and the ratio to a lower bound of the time any tour that sees everything needs:
-  the robot must at least reach, for the free cell hardest to see, a place within lidar range of
-  it, so ``max over free cells of (the shortest path, at the profile's max_vel_x, from the start to
-  the nearest reachable cell within the lidar's range square around it)`` -- walls do not block
-  sight in the bound (relaxed), and it is one way, not a tour: a loose lower bound, and the ratio an
-  upper bound of how far from the best tour the exploration is.
+- collisions (runs with any control tick in contact, and the ticks);
+- time, against the shortest tour that sees everything, which is not computed exactly (a watchman
+  route: NP-hard) but bracketed (``Sight``: places every 0.2 m the robot's centre may occupy, sight
+  by the simulator's ray caster all round to the lidar's range, travel at ``max_vel_x``, no
+  turning): from below by ``tour_lower_bound_s`` (the robot must at least reach a place from which
+  the last visible free cell is in sight: one way, not a tour), from above by ``greedy_tour`` (a
+  feasible tour: greedy set cover of the visible cells, then nearest neighbour + 2-opt over
+  shortest paths). time / greedy tour <= time / shortest tour <= time / lower bound.
 
 ``explore.navigate_while_mapping``: in the office, mapping from the corridor's west end, goals
 drawn at random in the building's free space (0.45 m clear, >= 4 m from the start), most of them
