@@ -207,7 +207,7 @@ def greedy_tour(world, start: Pose2D, s: Sight) -> Tour:
 
     It is a feasible tour, not the optimum: the shortest tour that sees everything (with the same
     sight and no turning) is no longer than it; ``tour_lower_bound_s`` bounds it from below."""
-    sees = s.sees.tocsc().astype(np.float32).tocsr()
+    sees = s.sees.astype(np.float32)
     unseen = np.asarray(sees.sum(axis=0)).ravel() > 0  # only cells some place sees
     chosen: list[int] = []
     while unseen.any():
