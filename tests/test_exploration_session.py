@@ -253,28 +253,6 @@ def test_a_failed_frontier_goal_is_blacklisted_and_another_chosen():
         s.close()
 
 
-def test_a_stuck_frontier_goal_is_given_up_at_once_not_after_stuck_timeout():
-    # In MAPPING no recovery runs: a STUCK navigator only waits out stuck_timeout (10 s) and fails.
-    stack = _stack()
-    s, ex, nav = stack.session, stack.exploration, stack.navigation
-    try:
-        ex.start()
-        assert _run_until(stack, lambda: ex.goals_sent > 0 and nav.active, 10.0)
-        goal = ex._goal
-        assert goal is not None and math.dist(goal, (s.pose.x, s.pose.y)) > 0.6
-        nav.navigator.halt("SafetyStop", "test: held")
-        t0 = s.clock.now()
-        assert _run_until(stack, lambda: ex.goals_failed >= 1, 1.0), ex.status()
-        assert s.clock.now() - t0 < 1.0 < nav.navigator.options.stuck_timeout
-        assert ex.explorer.blacklist[-1] == goal
-        ev = [e for e in s.events if e.get("status") == "frontier blacklisted"][-1]
-        assert ev["reason"] == "SafetyStop"
-        assert _run_until(stack, lambda: ex._goal is not None and nav.active, 5.0)
-        assert math.dist(ex._goal, goal) > ex.options.frontiers.blacklist_radius
-    finally:
-        s.close()
-
-
 def test_a_frontier_goal_counts_as_reached_within_min_goal_distance():
     # the lidar sees the frontier from there; the last turns onto a goal near furniture are no
     # progress for Nav2's progress checker (0.5 m) and used to end in NoProgress

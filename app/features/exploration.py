@@ -27,7 +27,6 @@ import numpy as np
 
 from app.modes import Mode, TransitionRefused
 from nav.exploration import FrontierExplorer, FrontierOptions, FrontierReport, goal_pose
-from nav.navigator import NavState
 from nav.types import Pose2D
 
 if TYPE_CHECKING:
@@ -253,29 +252,18 @@ class Exploration:
         return False
 
     def _check_goal_progress(self, pose: Pose2D) -> None:
-        """End the current goal early where waiting gains nothing: the robot is within
-        ``min_goal_distance`` of it (the frontier is in sight; the last turns onto a goal near
-        furniture used to end in ``NoProgress`` 10-30 s later), or the navigator is STUCK (in
-        MAPPING no recovery runs: it would only wait out ``stuck_timeout`` and fail, so the goal is
-        blacklisted now). Either way the frontiers are evaluated again at once."""
+        """Count the current goal reached once the robot is within ``min_goal_distance`` of it: the
+        frontier is in sight from there, and the last turns onto a goal near furniture ended in
+        ``NoProgress`` 10-30 s later (traced in the office). The frontiers are evaluated again at
+        once. A STUCK goal is left to navigation's recoveries, which run in MAPPING."""
         nav = self.navigation
         if self._request is None or self._goal is None or nav.current_request != self._request:
             return
         goal = self._goal
-        if math.hypot(goal[0] - pose.x, goal[1] - pose.y) <= self.options.frontiers.min_goal_distance:
-            self.goals_reached += 1
-            self.session.add_event("exploration", status="frontier reached", goal=list(goal))
-        elif nav.navigator.state == NavState.STUCK and self.session.modes.mode == Mode.MAPPING:
-            self.goals_failed += 1
-            self.explorer.mark_failed(goal)
-            self.session.add_event(
-                "exploration",
-                status="frontier blacklisted",
-                goal=list(goal),
-                reason=nav.navigator.stuck_reason,
-            )
-        else:
+        if math.hypot(goal[0] - pose.x, goal[1] - pose.y) > self.options.frontiers.min_goal_distance:
             return
+        self.goals_reached += 1
+        self.session.add_event("exploration", status="frontier reached", goal=list(goal))
         self._cancel_goal()
         self._need_eval = True
 
