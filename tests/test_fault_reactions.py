@@ -194,7 +194,9 @@ def test_loop_overrun_faults_with_the_measured_period_and_recovers() -> None:
         assert poll(lambda: s.fault is not None, 20.0), "no loop overrun fault"
         assert s.fault.startswith("loop overrun") and "ms" in s.fault
         period_ms = float(s.fault.split("period ")[1].split(" ms")[0])
-        assert period_ms >= 150.0
+        # every tick of the run was late (> 2 x the 50 ms period); on a loaded machine the run may begin
+        # with ticks the load made late before the injected 150 ms, so the mean is not always >= 150
+        assert period_ms > 100.0
         assert s.modes.mode == Mode.FAULT
         assert poll(lambda: driver._cmd == Twist2D() and s.last_command.is_zero(), 2.0)
         assert any(e["type"] == "fault" and e["reason"].startswith("loop overrun") for e in s.events)

@@ -254,6 +254,7 @@ def view_luma(page) -> float:
     return float(img.mean())
 
 
+@pytest.mark.timeout(900)  # two software-rendered 3D views; the second compiles its bundle under load
 def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: EmbeddedServer) -> None:
     """Tab A unticks the map and picks "initial pose"; tab B, a new session opened afterwards, still has
     the map ticked and drawn and its clicks set goals (two browser contexts: two operators)."""
