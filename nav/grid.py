@@ -243,19 +243,29 @@ class LogOddsGrid:
         self.logodds, self.seen, self.origin = lo_new, seen_new, np.asarray(new_origin, dtype=float)
 
     # -- updates ----------------------------------------------------------------------------------
+    def _grown_for(
+        self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, tuple[int, int]] | None:
+        """One scan's rays as arrays (one origin broadcast to every end), with the grid grown to hold
+        them; also the shape before growing. None when there is no ray."""
+        origins = np.asarray(origins, dtype=float).reshape(-1, 2)
+        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
+        if ends.shape[0] == 0:
+            return None
+        if origins.shape[0] == 1 and ends.shape[0] > 1:
+            origins = np.broadcast_to(origins, ends.shape)
+        old_shape = self.shape
+        self.ensure_contains(np.vstack((origins, ends)))
+        return origins, ends, np.asarray(hit, dtype=bool), old_shape
+
     def insert_rays(self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray) -> InsertResult:
         """Integrate one scan's rays ``origins[i] -> ends[i]`` (grid frame). ``hit[i]`` marks the end
         as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
         Compiled (:func:`_insert_kernel`); semantics as :meth:`insert_rays_reference`."""
-        origins = np.asarray(origins, dtype=float).reshape(-1, 2)
-        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
-        if ends.shape[0] == 0:
+        rays = self._grown_for(origins, ends, hit)
+        if rays is None:
             return InsertResult(np.zeros(0, np.int64), 0, False, np.ones(0))
-        if origins.shape[0] == 1 and ends.shape[0] > 1:
-            origins = np.broadcast_to(origins, ends.shape)
-        hit = np.asarray(hit, dtype=bool)
-        old_shape = self.shape
-        self.ensure_contains(np.vstack((origins, ends)))
+        origins, ends, hit, old_shape = rays
         opt = self.options
         occupied, n_free, reach = _insert_kernel(
             self.logodds.reshape(-1),
@@ -286,15 +296,10 @@ class LogOddsGrid:
         cannot tell whether it passed that surface (a dropout on a wall reads +inf too), and
         clearing past it fans free space out through the walls. A ray with a return proves the
         space up to it free and clears through (a door opened, a person left)."""
-        origins = np.asarray(origins, dtype=float).reshape(-1, 2)
-        ends = np.asarray(ends, dtype=float).reshape(-1, 2)
-        if ends.shape[0] == 0:
+        rays = self._grown_for(origins, ends, hit)
+        if rays is None:
             return InsertResult(np.zeros(0, np.int64), 0, False, np.ones(0))
-        if origins.shape[0] == 1 and ends.shape[0] > 1:
-            origins = np.broadcast_to(origins, ends.shape)
-        hit = np.asarray(hit, dtype=bool)
-        old_shape = self.shape
-        self.ensure_contains(np.vstack((origins, ends)))
+        origins, ends, hit, old_shape = rays
         h, w = self.shape
         opt = self.options
         pts, ray = trace_rays(origins, ends, self.resolution * opt.step_fraction)

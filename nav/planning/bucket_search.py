@@ -29,9 +29,9 @@ import threading
 import numpy as np
 from numba import njit
 
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2
+from nav.planning.grid_search import _octile as octile_heuristic  # the heap kernel's, inlined
 
-SQRT2 = math.sqrt(2.0)
 # f-width of one bucket, in cells. Measured: with unit cells (random 20 %, Willow) 0.1, 0.25 and 0.5
 # ran equally fast (1.0 expands 6 % more on the random grid); with Nav2's cost_travel_multiplier 2
 # on Willow, re-opened cells grow with the width (265 k, 293 k, 330 k, 482 k expansions at 0.1,
@@ -48,15 +48,6 @@ _PHASE, _BUCKET, _LIVE, _EXPANSIONS = 0, 1, 2, 3
 # (growing inside the kernel reassigns an array in the hot loop, which numba then reference-counts
 # on every iteration: measured 1.6x slower on the random grid)
 _GROW = 3
-
-
-@njit(cache=True, nogil=True, inline="always")
-def _octile(r: int, c: int, gr: int, gc: int) -> float:
-    dr = abs(r - gr)
-    dc = abs(c - gc)
-    if dr < dc:
-        return dc + (SQRT2 - 1.0) * dr
-    return dr + (SQRT2 - 1.0) * dc
 
 
 @njit(cache=True, nogil=True)
@@ -134,7 +125,7 @@ def _search(
     gr = goal // w
     gc = goal - gr * w
     sr = start // w
-    f0 = heuristic_weight * _octile(sr, start - sr * w, gr, gc)
+    f0 = heuristic_weight * octile_heuristic(sr, start - sr * w, gr, gc)
     if ctl[_PHASE] == 0:
         _fill(passable, cost, use_cost, state, padded_cost)
         counts[:] = 0
@@ -201,7 +192,7 @@ def _search(
                 state[nb] = 2  # never expanded: its cost is all the search needs
                 best = ng
                 continue
-            f = ng + heuristic_weight * _octile(r + dr, c + dc, gr, gc)
+            f = ng + heuristic_weight * octile_heuristic(r + dr, c + dc, gr, gc)
             if f >= best:
                 state[nb] = 2  # cannot lead to a cheaper goal path; g stays to keep worse ones out
                 continue
