@@ -14,6 +14,7 @@ from scipy.ndimage import distance_transform_edt, label
 
 from bench.scenarios import family_bench
 from bench.scenarios.families import ContactLog, FamilySet, run_trial
+from bench.scenarios.shards import budget_s
 from bench.scenarios.suite import fresh_stack
 from nav.types import Pose2D, Twist2D
 from robot.profiles import load_profile
@@ -222,7 +223,7 @@ def test_family_benchmarks_registered_per_controller(monkeypatch: pytest.MonkeyP
     assert names == {f"scenarios.family.{f}_{c}" for f in FAMILIES for c in ("dwa", "teb")}
     assert all(b.group == "slow" for b in family_bench.BENCHMARKS)
     monkeypatch.delenv(family_bench.BUDGET_VAR, raising=False)
-    assert family_bench.budget_s() is None
+    assert budget_s(family_bench.BUDGET_VAR) is None
     monkeypatch.setenv(family_bench.BUDGET_VAR, "-3")
     with pytest.raises(ValueError, match=family_bench.BUDGET_VAR):
-        family_bench.budget_s()
+        budget_s(family_bench.BUDGET_VAR)

@@ -4,7 +4,9 @@
 Each runs ``NAVDECK_FAMILY_TRIALS`` trials (default 200, the issue's minimum per controller and
 family), every one in a new world of the family with two walkers (``bench/scenarios/families.py``).
 ``NAVDECK_FAMILY_BUDGET_S`` (CPU seconds, optional) stops a set early on a shared machine; the
-figures then name the N actually run.
+figures then name the N actually run. ``NAVDECK_FAMILY_FIRST`` starts at that trial index and
+``NAVDECK_FAMILY_LOG`` appends every trial to a JSONL file, so a set can run in shards
+(``bench/scenarios/shards.py``).
 
 Targets (issue 16): 0 contacts while moving, for DWA and TEB, with walkers, in every family.
 Reported without a target: success, timeout and fault rates, walkers into a stopped robot (not the
@@ -15,29 +17,19 @@ from __future__ import annotations
 
 import os
 import sys
+import time
 from collections.abc import Callable
 
 from bench.core import Benchmark, Figure
 from bench.scenarios.families import FamilySet, FamilyTrial, describe, family_trials
 from bench.scenarios.issue5 import CONTROLLERS, trial_count
+from bench.scenarios.shards import TrialLog, budget_s, first_trial
 from robot.sim.worldgen import FAMILIES
 
 TRIALS_VAR = "NAVDECK_FAMILY_TRIALS"
 BUDGET_VAR = "NAVDECK_FAMILY_BUDGET_S"
-
-
-def budget_s() -> float | None:
-    """``NAVDECK_FAMILY_BUDGET_S`` as CPU seconds per set, None when unset."""
-    raw = os.environ.get(BUDGET_VAR)
-    if raw is None:
-        return None
-    try:
-        value = float(raw)
-    except ValueError:
-        raise ValueError(f"{BUDGET_VAR} must be a positive number of seconds, got {raw!r}") from None
-    if not value > 0:
-        raise ValueError(f"{BUDGET_VAR} must be a positive number of seconds, got {raw!r}")
-    return value
+FIRST_VAR = "NAVDECK_FAMILY_FIRST"
+LOG_VAR = "NAVDECK_FAMILY_LOG"
 
 
 def _progress(trial: FamilyTrial) -> None:
@@ -79,14 +71,44 @@ def family_figures(res: FamilySet) -> list[Figure]:
     return figs
 
 
+def _log_line(log: TrialLog, trial: FamilyTrial, cpu_s: float) -> None:
+    r, c = trial.result, trial.contacts
+    log.write(
+        int(trial.name.rsplit(" ", 1)[1]),
+        trial.outcome,
+        cpu_s,
+        world_seed=trial.world_seed,
+        sim_s=round(r.time_s, 3),
+        contacts_while_moving=c.while_moving,
+        contacts_with_walkers_while_moving=c.moving_person,
+        walker_into_stopped=c.walker_into_stopped,
+        timeout=int(trial.outcome == "timeout"),
+        fault=int(trial.outcome == "fault"),
+        recoveries=r.recoveries,
+        min_person_clearance_m=r.min_person_clearance_m,
+    )
+
+
 def _bench(family: str, controller: str) -> Callable[[], list[Figure]]:
     def run() -> list[Figure]:
+        log = TrialLog(os.environ.get(LOG_VAR), f"family {family} {controller}")
+        first = first_trial(FIRST_VAR)
+        clock = [time.process_time()]
+
+        def on_trial(trial: FamilyTrial) -> None:
+            now = time.process_time()
+            _log_line(log, trial, now - clock[0])
+            clock[0] = now
+            _progress(trial)
+
+        n = trial_count(TRIALS_VAR, 200)
         res = family_trials(
             family,
-            trial_count(TRIALS_VAR, 200),
+            first + n,
             controller=controller,
-            on_trial=_progress,
-            budget_s=budget_s(),
+            on_trial=on_trial,
+            only=frozenset(range(first, first + n)),
+            budget_s=budget_s(BUDGET_VAR),
         )
         return family_figures(res)
 

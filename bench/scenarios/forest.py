@@ -19,7 +19,8 @@ position comes within ``GOAL_RADIUS`` (1 m) of the goal in under ``TIME_LIMIT`` 
 seconds with no collision on the way; the run is then cancelled. Targets: success >= 0.97,
 collisions 0, no fault. ``NAVDECK_FOREST_TRIALS`` (default 200) sets N per set,
 ``NAVDECK_FOREST_BUDGET_S`` (CPU seconds per set, optional) stops a set early: the figures name the
-N actually run. Trial ``i`` depends on (seed, i) alone.
+N actually run; ``NAVDECK_FOREST_FIRST`` and ``NAVDECK_FOREST_LOG`` run a set in shards
+(``bench/scenarios/shards.py``). Trial ``i`` depends on (seed, i) alone.
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ import numpy as np
 from app.commands.sim_nav import SimNavResult, SimStack, build_sim_stack, drive, unknown_grid
 from bench.core import Benchmark, Figure
 from bench.scenarios.issue5 import CONTROLLERS, trial_count
+from bench.scenarios.shards import TrialLog, budget_s, first_trial
 from nav.types import Pose2D
 from robot.safety import SafetyFilter
 from robot.sim.worldgen import generate
@@ -50,6 +52,8 @@ DISTANCE = (4.0, 20.0)
 """Straight start-goal distance drawn (m); the start and goal areas decide in practice."""
 TRIALS_VAR = "NAVDECK_FOREST_TRIALS"
 BUDGET_VAR = "NAVDECK_FOREST_BUDGET_S"
+FIRST_VAR = "NAVDECK_FOREST_FIRST"
+LOG_VAR = "NAVDECK_FOREST_LOG"
 
 
 @dataclass(frozen=True)
@@ -172,11 +176,13 @@ def forest_trials(
     prior_map: bool = True,
     on_trial: Callable[[ForestTrial], None] | None = None,
     budget_s: float | None = None,
+    first: int = 0,
 ) -> ForestSet:
-    """``n`` trials (fewer when ``budget_s`` CPU seconds run out: the set keeps its true N)."""
+    """Trials ``first .. first + n - 1`` (fewer when ``budget_s`` CPU seconds run out: the set keeps
+    its true N)."""
     out = ForestSet(prior_map, controller)
     c0 = time.process_time()
-    for i in range(n):
+    for i in range(first, first + n):
         if budget_s is not None and time.process_time() - c0 > budget_s:
             break
         trial = forest_trial(i, seed, controller, prior_map)
@@ -226,32 +232,39 @@ def forest_figures(res: ForestSet) -> list[Figure]:
     return figs
 
 
-def budget_s() -> float | None:
-    """``NAVDECK_FOREST_BUDGET_S`` as CPU seconds per set, None when unset."""
-    raw = os.environ.get(BUDGET_VAR)
-    if raw is None:
-        return None
-    try:
-        value = float(raw)
-    except ValueError:
-        value = math.nan
-    if not value > 0:
-        raise ValueError(f"{BUDGET_VAR} must be a positive number of seconds, got {raw!r}")
-    return value
-
-
 def _progress(trial: ForestTrial) -> None:
     print(f"  {'ok ' if trial.succeeded else 'FAIL'} {describe(trial)}", file=sys.stderr, flush=True)
 
 
 def _bench(prior_map: bool, controller: str) -> Callable[[], list[Figure]]:
     def run() -> list[Figure]:
+        log = TrialLog(os.environ.get(LOG_VAR), f"forest {'prior' if prior_map else 'noprior'} {controller}")
+        clock = [time.process_time()]
+
+        def on_trial(trial: ForestTrial) -> None:
+            now = time.process_time()
+            log.write(
+                trial.index,
+                trial.outcome,
+                now - clock[0],
+                world_seed=trial.world_seed,
+                succeeded=int(trial.succeeded),
+                collisions=trial.collisions,
+                fault=int(trial.fault is not None),
+                sim_s=round(trial.result.time_s, 3),
+                within_s=trial.within_s,
+                recoveries=trial.result.recoveries,
+            )
+            clock[0] = now
+            _progress(trial)
+
         res = forest_trials(
             trial_count(TRIALS_VAR, 200),
             controller=controller,
             prior_map=prior_map,
-            on_trial=_progress,
-            budget_s=budget_s(),
+            on_trial=on_trial,
+            budget_s=budget_s(BUDGET_VAR),
+            first=first_trial(FIRST_VAR),
         )
         return forest_figures(res)
 
