@@ -29,7 +29,7 @@ def test_shards_of_one_commit_sum_into_one_set(tmp_path: Path) -> None:
     for i in (0, 1, 2, 5):
         log_a.write(i, "reached", 2.0, contacts_while_moving=0)
     for i in (6, 7):
-        log_b.write(i, "timeout" if i == 7 else "reached", 3.0, contacts_while_moving=i - 6)
+        log_b.write(i, "timeout" if i == 7 else "reached", 3.0, contacts_while_moving=i - 6, min_gap_m=i / 10)
     log_b.write(2, "fault", 1.0, contacts_while_moving=0)  # a re-run index keeps its last line
     stray = {"set": "family office dwa", "i": 9, "outcome": "reached", "cpu_s": 1, "commit": "other"}
     b.open("a").write(json.dumps(stray) + "\n")

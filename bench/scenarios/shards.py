@@ -115,7 +115,7 @@ def _ranges(indices: list[int]) -> str:
 
 def summarize(lines: list[dict[str, Any]], commit: str | None = None) -> dict[str, dict[str, Any]]:
     """Per set: N (distinct trial indices; a repeated index keeps its last line), ranges, outcomes,
-    and the sums of the numeric fields every line of the set has."""
+    the sums of the numeric fields of the set's lines and the smallest value of its ``min_*`` fields."""
     by_set: dict[str, dict[int, dict[str, Any]]] = defaultdict(dict)
     for line in lines:
         if commit is None or line.get("commit") == commit:
@@ -123,12 +123,18 @@ def summarize(lines: list[dict[str, Any]], commit: str | None = None) -> dict[st
     out: dict[str, dict[str, Any]] = {}
     for name, trials in sorted(by_set.items()):
         rows = list(trials.values())
-        numeric = [k for k, v in rows[0].items() if isinstance(v, int | float) and k != "i"]
+        numeric = [
+            k for k, v in rows[0].items() if isinstance(v, int | float) and k not in ("i", "world_seed")
+        ]
+        smallest = [k for k in numeric if k.startswith("min_")]
         out[name] = {
             "n": len(rows),
             "ranges": _ranges(list(trials)),
             "outcomes": dict(Counter(r["outcome"] for r in rows).most_common()),
-            "sums": {k: round(sum(float(r.get(k) or 0) for r in rows), 3) for k in numeric},
+            "sums": {
+                k: round(sum(float(r.get(k) or 0) for r in rows), 3) for k in numeric if k not in smallest
+            },
+            "smallest": {k: min(float(r[k]) for r in rows if r.get(k) is not None) for k in smallest},
             "commits": sorted({r.get("commit", "") for r in rows}),
         }
     return out
