@@ -38,6 +38,7 @@ def test_shards_of_one_commit_sum_into_one_set(tmp_path: Path) -> None:
     assert got["n"] == 6 and got["ranges"] == "0-2, 5-7"
     assert got["outcomes"] == {"reached": 4, "timeout": 1, "fault": 1}
     assert got["sums"]["contacts_while_moving"] == 1.0 and got["sums"]["cpu_s"] == 13.0
+    assert got["smallest"] == {"min_gap_m": 0.6}
     assert summarize(read_lines([a, b]))["family office dwa"]["n"] == 7  # no commit filter
 
 

@@ -123,9 +123,10 @@ def summarize(lines: list[dict[str, Any]], commit: str | None = None) -> dict[st
     out: dict[str, dict[str, Any]] = {}
     for name, trials in sorted(by_set.items()):
         rows = list(trials.values())
-        numeric = [
-            k for k, v in rows[0].items() if isinstance(v, int | float) and k not in ("i", "world_seed")
-        ]
+        keys = {
+            k for r in rows for k, v in r.items() if isinstance(v, int | float) and not isinstance(v, bool)
+        }
+        numeric = sorted(keys - {"i", "world_seed"})
         smallest = [k for k in numeric if k.startswith("min_")]
         out[name] = {
             "n": len(rows),
