@@ -195,6 +195,12 @@ class Navigator:
         self._driving_time = 0.0  # s spent following a path in this request
         self._last_now: float | None = None
         self._debug: Any = None
+        self.path_on_map_alone: Callable[[Pose2D, Pose2D], bool] | None = None
+        """Whether a path from the pose to the goal exists on the map alone (no sensed obstacles).
+        Asked only when a goal's first plan finds no path: if the map alone has one, sensed obstacles
+        block the way (a person in the only doorway), so the navigator goes STUCK and the recoveries
+        clear the costmaps and wait before it plans again, as Nav2's ClearGlobalCostmap recovery
+        around ComputePathToPose; otherwise the goal fails at once. None: always fail at once."""
         self._activity = "idle"
         self._held: tuple[float, Twist2D, Any] | None = None  # (time, cmd, debug) of the last compute
         self._tick_dt = 0.0  # seconds between the last two ticks
@@ -354,7 +360,7 @@ class Navigator:
         self._maybe_plan(local)
         if self.state in TERMINAL:  # planning failed with no path to fall back on
             return self._tick(ZERO_TWIST, self.outcome)
-        if self._path is None:
+        if self._path is None and self.state != NavState.STUCK:
             self.state = NavState.PLANNING
             self._activity = "waiting for a path" if self._pending is not None else "planning"
             return self._tick(ZERO_TWIST)
@@ -411,7 +417,7 @@ class Navigator:
         reason = ""
         if self._force_plan:
             reason, self._force_plan = self._force_plan, ""
-        elif self._path is None:
+        elif self._path is None and self.state != NavState.STUCK:  # STUCK waits for resume()
             reason = "new goal"
         elif (
             o.replan_on_blocked
@@ -471,10 +477,19 @@ class Navigator:
     def _plan_failed(self, exc: PlannerError) -> None:
         self._last_plan_error = exc
         if self._path is None:
-            self._fail(type(exc).__name__, str(exc), exc)
+            if isinstance(exc, NoValidPathFound) and self._sensed_obstacles_block():
+                self._enter_stuck(
+                    type(exc).__name__, f"no path while sensed obstacles block the way: {exc}", exc
+                )
+            else:
+                self._fail(type(exc).__name__, str(exc), exc)
         elif self._blocked(None) and self.state != NavState.STUCK:
             self._stuck(type(exc).__name__, f"path blocked and no new path: {exc}", exc)
         # otherwise keep following the current path; the next periodic replan tries again
+
+    def _sensed_obstacles_block(self) -> bool:
+        check = self.path_on_map_alone
+        return check is not None and check(self._pose, self._q.goals[self._q.index])
 
     def _keep_current(self, new_length: float) -> bool:
         """Hysteresis: refuse a new path of ``new_length`` m because the current one is still valid

@@ -206,6 +206,38 @@ def test_unreachable_goal_fails_with_typed_reason() -> None:
         st.session.close()
 
 
+def _doorway_world() -> World:
+    """A 6 x 4 m room split by a wall at x = 3 with one 0.8 m doorway at y = 2."""
+    world = World.box(6.0, 4.0)
+    world.grid.data[:, 58:62] = 100
+    world.grid.data[32:48, 58:62] = 0  # rows 32..47: y 1.6 .. 2.4 m
+    return World(world.grid, name="doorway", start_pose=Pose2D(1.5, 2.0, 0.0))
+
+
+@pytest.mark.parametrize("map_alone_check", [True, False])
+def test_a_person_in_the_only_doorway_delays_the_goal_instead_of_failing_it(map_alone_check: bool) -> None:
+    """The first plan finds no path while a person stands in the doorway (sensed, not on the map):
+    the navigator recovers and waits, as Nav2's planner-failure recovery, and reaches the goal once
+    the person walks on. Without the map-alone check the goal failed at once (NoValidPathFound)."""
+    world = _doorway_world()
+    world.people.add_loop([[3.0, 2.0], [5.4, 3.4]], speed=0.5)  # from the doorway away, and back
+    st = build_sim_stack(world.grid, world, world.start_pose, localization="truth")
+    try:
+        if not map_alone_check:
+            st.navigation.navigator.path_on_map_alone = None
+        st.localization.set_initial_pose(world.start_pose)
+        st.session.run_for(0.5)  # the lidar sees the person in the doorway
+        st.navigation.set_goals([Pose2D(4.5, 1.0, 0.0)])
+        out = run_until_done(st, 120.0)
+        if map_alone_check:
+            assert out["kind"] == "reached", out
+            assert st.navigation.recoveries >= 1
+        else:
+            assert out["kind"] == "failed" and out["reason"] == "NoValidPathFound"
+    finally:
+        st.session.close()
+
+
 def test_set_map_resets_localization_and_costmaps(stack: SimStack) -> None:
     stack.localization.set_initial_pose(APARTMENT_START)
     stack.session.run_for(0.5)

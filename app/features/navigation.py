@@ -324,6 +324,7 @@ class Navigation:
             teb_overrides=self._controller_overrides("teb"),
             **self._controller_overrides("dwa"),
         )
+        self.navigator.path_on_map_alone = self._path_on_map_alone
         self.default_controller = self.navigator.controller_name
         virtual = bool(getattr(session.clock, "is_virtual", False))
         self._wait = virtual if o.wait_for_plans is None else o.wait_for_plans
@@ -972,6 +973,18 @@ class Navigation:
             self._global.update_from_scan(pose, frame.scan, lp)
             self._global_cm = self._global.costmap()
             self._costmap_version += 1
+
+    def _path_on_map_alone(self, start: Pose2D, goal: Pose2D) -> bool:
+        """Does the planner find a path on the global costmap without its sensed obstacles? (The
+        navigator asks when a goal's first plan fails: a person in a doorway then blocks the way
+        for a while, not for good.)"""
+        if self._global is None:
+            return False
+        try:
+            self.planner.plan(self._global.map_only(), start, goal)
+        except PlannerError:
+            return False
+        return True
 
     def _request_plan(self, req: PlanRequest) -> None:
         self.plans += 1

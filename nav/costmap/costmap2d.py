@@ -393,6 +393,14 @@ class Costmap2D:
         self._refresh()
         return Costmap(self.geometry, self._master.copy())
 
+    def map_only(self) -> Costmap:
+        """The master grid without the sensors' marks: the map (and keepout zones) inflated. What
+        the costmap would be with every sensed obstacle gone (a person who walks away)."""
+        base = self._base
+        if self.options.use_inflation_layer:
+            base = inflate(base, self.geometry.resolution, self._inscribed, self.options.inflation_layer)
+        return Costmap(self.geometry, base.copy())
+
     def cost_at(self, xy: np.ndarray) -> np.ndarray:
         """Master costs at (N, 2) world points (255 off the grid)."""
         self._refresh()
