@@ -36,7 +36,7 @@ from nav.localization.kld import count_bins, kld_sample_count
 from nav.localization.motion_models import MotionAlphas, sample_motion
 from nav.localization.options import AmclOptions
 from nav.localization.resampling import low_variance_resample
-from nav.raycast import RayCaster
+from nav.localization.sphere_trace import ClearanceTracer
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
 # Nav2 pf_update_converged: converged when every particle is within this distance of the mean.
@@ -104,13 +104,11 @@ class Amcl:
         self._field = sm.LikelihoodField(grid, options.laser_likelihood_max_dist, options.sigma_hit)
         self._occupied = grid.occupied_mask()
         self._cast_rays = cast_rays
-        # the beam model's own caster, built once per map: its skip table is the likelihood
-        # field's distances (capped at laser_likelihood_max_dist, still a valid lower bound)
-        self._caster: RayCaster | None = None
+        # the beam model's own clearance table, built once per map: uncapped (the likelihood
+        # field's distances stop at laser_likelihood_max_dist, which would cap every jump)
+        self._caster: ClearanceTracer | None = None
         if options.laser_model_type == "beam" and cast_rays is None:
-            self._caster = RayCaster(
-                self._occupied, grid.geometry, clearance=self._field.distance[1:-1, 1:-1]
-            )
+            self._caster = ClearanceTracer(self._occupied, grid.geometry)
         free_r, free_c = np.nonzero(grid.free_mask())
         self._free_xy = grid.geometry.cell_to_world(free_r, free_c)  # free cell centres, map frame
         self._particles = np.zeros((0, 3))

@@ -24,9 +24,9 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.ndimage import distance_transform_edt
 
-from nav import raycast
 from nav.localization.beam_kernel import beam_log_weights
 from nav.localization.options import AmclOptions
+from nav.localization.sphere_trace import ClearanceTracer
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
 # ray caster: (occupied (H, W) bool, geometry, origins (P, 2), angles (P, B), max_range) -> (P, B)
@@ -251,15 +251,15 @@ def beam_model_weights(
 
 
 def beam_model_weights_compiled(
-    caster: raycast.RayCaster, particles: np.ndarray, laser_pose: Pose2D, beams: Beams, options: AmclOptions
+    tracer: ClearanceTracer, particles: np.ndarray, laser_pose: Pose2D, beams: Beams, options: AmclOptions
 ) -> np.ndarray:
     """``beam_model_weights`` in one compiled pass over particles x beams (``beam_kernel``) on a
-    caster built once per map; the same log weights."""
+    clearance table built once per map; the same log weights."""
     if beams.ranges.size == 0:
         return np.zeros(particles.shape[0])
     lx, ly, lt = _laser_poses(particles, laser_pose)
     return beam_log_weights(
-        caster, np.column_stack((lx, ly)), lt, beams.bearings, beams.ranges, beams.range_max, options
+        tracer, np.column_stack((lx, ly)), lt, beams.bearings, beams.ranges, beams.range_max, options
     )
 
 
