@@ -10,7 +10,8 @@ import pytest
 from nav.localization import Amcl
 from nav.localization import sensor_models as sm
 from nav.localization.options import AmclOptions
-from nav.raycast import RayCaster, cast_rays
+from nav.localization.sphere_trace import ClearanceTracer
+from nav.raycast import cast_rays
 from nav.types import GridGeometry, LaserScan, OccupancyGrid, Pose2D
 
 RES = 0.1
@@ -175,9 +176,9 @@ def _rooms_grid(seed: int) -> OccupancyGrid:
 
 @pytest.mark.parametrize("seed", range(4))
 def test_compiled_beam_model_equals_reference(seed: int) -> None:
-    """The compiled beam update (one pass casting and scoring every beam, jumping across open
-    space) gives the numpy reference's log weights: particles anywhere, including in walls and
-    off the map, readings with and without returns, a laser mounted off-centre."""
+    """The compiled beam update (one pass casting and scoring every beam, sphere tracing across
+    open space) gives the numpy reference's log weights: particles anywhere, including in walls
+    and off the map, readings with and without returns, a laser mounted off-centre."""
     grid = _rooms_grid(seed)
     rng = np.random.default_rng(seed)
     geo = grid.geometry
@@ -192,18 +193,19 @@ def test_compiled_beam_model_equals_reference(seed: int) -> None:
     o = AmclOptions(laser_model_type="beam")
     occ = grid.occupied_mask()
     want = sm.beam_model_weights(occ, grid, cast_rays, particles, laser, beams, o)
-    for caster in (RayCaster(occ, geo), RayCaster(occ, geo, clearance=True)):
-        got = sm.beam_model_weights_compiled(caster, particles, laser, beams, o)
-        np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
+    got = sm.beam_model_weights_compiled(ClearanceTracer(occ, geo), particles, laser, beams, o)
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
 
 
 def test_amcl_beam_model_default_is_the_compiled_pass() -> None:
-    """Amcl's default beam model (compiled, on a caster built once per map whose jumps use the
-    likelihood field's capped distances) weighs poses like the reference with ``cast_rays``."""
+    """Amcl's default beam model (compiled, on a clearance table built once per map, not capped
+    at the likelihood field's max distance) weighs poses like the reference with ``cast_rays``."""
     grid = _rooms_grid(1)
     o = AmclOptions(laser_model_type="beam", laser_likelihood_max_dist=0.5)
     fast, ref = Amcl(o, grid, seed=0), Amcl(o, grid, seed=0, cast_rays=cast_rays)
     assert fast._caster is not None and ref._caster is None
+    clear = fast._caster.tables[0]
+    assert clear.max() * grid.geometry.resolution > 2.0 * o.laser_likelihood_max_dist
     rng = np.random.default_rng(3)
     poses = np.column_stack(
         (rng.uniform(-1.0, 9.0, 300), rng.uniform(1.0, 9.0, 300), rng.uniform(-3, 3, 300))

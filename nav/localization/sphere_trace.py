@@ -31,7 +31,15 @@ WALK_EXIT = 2.0
 
 @njit(cache=True, nogil=True)
 def trace_ray(
-    clear: np.ndarray, stride: int, width: int, height: int, u0: float, v0: float, du: float, dv: float, t_max: float
+    clear: np.ndarray,
+    stride: int,
+    width: int,
+    height: int,
+    u0: float,
+    v0: float,
+    du: float,
+    dv: float,
+    t_max: float,
 ) -> float:
     """One ray in grid-local cell units (origin (u0, v0), unit direction (du, dv)): the entry
     distance of the first occupied cell, 0 from inside one, inf if none is entered within
@@ -63,10 +71,11 @@ def trace_ray(
     dtx, dty = abs(inv_du), abs(inv_dv)
     t = t_lo
     while True:
-        # floor of a point inside [0, width] x [0, height], shifted into the padded table
-        ix = int(math.floor(u0 + t * du))
-        iy = int(math.floor(v0 + t * dv))
-        cell = (iy + 1) * stride + ix + 1
+        # the padded table's cell of a point inside [0, width] x [0, height] (up to rounding, so
+        # > -1): truncation of the shifted coordinate is its floor
+        px = int(u0 + t * du + 1.0)
+        py = int(v0 + t * dv + 1.0)
+        cell = py * stride + px
         c = clear[cell]
         if c >= JUMP_MIN:
             t += c
@@ -76,8 +85,8 @@ def trace_ray(
         if c < 0.0:  # the origin (or the grid's edge where the ray enters) is in an occupied cell
             return t
         # cell by cell: the times the ray crosses its next column and row boundaries
-        tx = ((ix + (1 if du > 0.0 else 0)) - u0) * inv_du if du != 0.0 else np.inf
-        ty = ((iy + (1 if dv > 0.0 else 0)) - v0) * inv_dv if dv != 0.0 else np.inf
+        tx = ((px - (0 if du > 0.0 else 1)) - u0) * inv_du if du != 0.0 else np.inf
+        ty = ((py - (0 if dv > 0.0 else 1)) - v0) * inv_dv if dv != 0.0 else np.inf
         while True:
             if tx < ty:
                 t = tx
