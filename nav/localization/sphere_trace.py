@@ -70,11 +70,12 @@ def trace_ray(
     sy = stride if dv > 0.0 else -stride
     dtx, dty = abs(inv_du), abs(inv_dv)
     t = t_lo
+    u1, v1 = u0 + 1.0, v0 + 1.0  # shifted by the table's border
     while True:
         # the padded table's cell of a point inside [0, width] x [0, height] (up to rounding, so
         # > -1): truncation of the shifted coordinate is its floor
-        px = int(u0 + t * du + 1.0)
-        py = int(v0 + t * dv + 1.0)
+        px = int(u1 + t * du)
+        py = int(v1 + t * dv)
         cell = py * stride + px
         c = clear[cell]
         if c >= JUMP_MIN:
@@ -88,20 +89,21 @@ def trace_ray(
         tx = ((px - (0 if du > 0.0 else 1)) - u0) * inv_du if du != 0.0 else np.inf
         ty = ((py - (0 if dv > 0.0 else 1)) - v0) * inv_dv if dv != 0.0 else np.inf
         while True:
-            if tx < ty:
-                t = tx
-                tx += dtx
-                cell += sx
-            else:
-                t = ty
-                ty += dty
-                cell += sy
+            # selects rather than a branch: which boundary comes next is a coin flip per step
+            x_first = tx < ty
+            t = min(tx, ty)
+            cell += sx if x_first else sy
+            tx = tx + dtx if x_first else tx
+            ty = ty if x_first else ty + dty
             if t > t_hi:
                 return np.inf
             c = clear[cell]
             if c < 0.0:
                 return t
             if c >= WALK_EXIT:
+                t += c
+                if t > t_hi:
+                    return np.inf
                 break
 
 
