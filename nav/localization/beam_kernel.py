@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from nav.localization.options import AmclOptions
-from nav.localization.sphere_trace import ClearanceTracer, trace_ray
+from nav.localization.sphere_trace import ClearanceTracer, trace_fan
 
 
 @njit(cache=True, nogil=True)
@@ -54,17 +54,22 @@ def _beam_log_weights(
         short[k] = z_short * lam * math.exp(-lam * ranges[k])
         floor_p[k] = z_max if ranges[k] >= range_max else z_rand / range_max
     cb, sb = np.cos(bearings), np.sin(bearings)
+    # per-particle work arrays, allocated once per call
+    du, dv, t, t_hi, expected = np.empty(b), np.empty(b), np.empty(b), np.empty(b), np.empty(b)
+    active = np.empty(b, dtype=np.int64)
     out = np.empty(u0.shape[0])
     for i in range(u0.shape[0]):
-        acc = 0.0
         ch, sh = math.cos(heading[i]), math.sin(heading[i])
         for k in range(b):
             # the beam's direction by the angle-sum identities: no trigonometry per ray
-            du = ch * cb[k] - sh * sb[k]
-            dv = sh * cb[k] + ch * sb[k]
-            t = trace_ray(clear, stride, width, height, u0[i], v0[i], du, dv, t_max)
-            expected = min(t * resolution, range_max) if t != np.inf else range_max
-            z = ranges[k] - expected
+            du[k] = ch * cb[k] - sh * sb[k]
+            dv[k] = sh * cb[k] + ch * sb[k]
+        trace_fan(clear, stride, width, height, u0[i], v0[i], du, dv, t_max, t, t_hi, active, expected)
+        acc = 0.0
+        for k in range(b):
+            e = expected[k]
+            e = min(e * resolution, range_max) if e != np.inf else range_max
+            z = ranges[k] - e
             pz = z_hit * math.exp(-z * z * inv_two_var) + floor_p[k]
             if z < 0.0:
                 pz += short[k]

@@ -29,47 +29,41 @@ JUMP_MIN = 1.0
 WALK_EXIT = 2.0
 
 
-@njit(cache=True, nogil=True)
-def trace_ray(
-    clear: np.ndarray,
-    stride: int,
-    width: int,
-    height: int,
-    u0: float,
-    v0: float,
-    du: float,
-    dv: float,
-    t_max: float,
-) -> float:
-    """One ray in grid-local cell units (origin (u0, v0), unit direction (du, dv)): the entry
-    distance of the first occupied cell, 0 from inside one, inf if none is entered within
-    ``t_max``. ``clear`` is the flat padded table (one free cell of border, ``stride`` = width + 2):
-    ``BLOCKED`` or a clearance lower bound in cells. Cells off the grid are free."""
-    # the part of the ray inside the grid's box [0, width] x [0, height] (slab test); the grid is
-    # convex, so a ray that leaves it never comes back
+@njit(cache=True, nogil=True, inline="always")
+def ray_span(
+    width: int, height: int, u0: float, v0: float, du: float, dv: float, t_max: float
+) -> tuple[float, float]:
+    """(t_lo, t_hi): the part of a ray within ``t_max`` inside the grid's box [0, width] x [0,
+    height] (slab test), empty if t_lo > t_hi. The grid is convex: a ray that leaves it never
+    comes back, and off it every cell is free."""
     t_lo, t_hi = 0.0, t_max
     if du != 0.0:
-        inv_du = 1.0 / du
-        ta, tb = -u0 * inv_du, (width - u0) * inv_du
+        ta, tb = -u0 / du, (width - u0) / du
         t_lo, t_hi = max(t_lo, min(ta, tb)), min(t_hi, max(ta, tb))
     elif u0 < 0.0 or u0 > width:
-        return np.inf
-    else:
-        inv_du = np.inf
+        return np.inf, -np.inf
     if dv != 0.0:
-        inv_dv = 1.0 / dv
-        ta, tb = -v0 * inv_dv, (height - v0) * inv_dv
+        ta, tb = -v0 / dv, (height - v0) / dv
         t_lo, t_hi = max(t_lo, min(ta, tb)), min(t_hi, max(ta, tb))
     elif v0 < 0.0 or v0 > height:
-        return np.inf
-    else:
-        inv_dv = np.inf
-    if t_lo > t_hi:
-        return np.inf
+        return np.inf, -np.inf
+    return t_lo, t_hi
+
+
+@njit(cache=True, nogil=True)
+def trace_from(
+    clear: np.ndarray, stride: int, u0: float, v0: float, du: float, dv: float, t: float, t_hi: float
+) -> float:
+    """A ray (grid-local cell units, origin (u0, v0), unit direction (du, dv)) from the point at
+    ``t`` inside its span, with nothing occupied before it: the entry distance of the first
+    occupied cell, ``t`` itself if that point is in one, inf if none is entered by ``t_hi``.
+    ``clear`` is the flat padded table (one free cell of border, ``stride`` = width + 2):
+    ``BLOCKED`` or a clearance lower bound in cells."""
+    inv_du = 1.0 / du if du != 0.0 else np.inf
+    inv_dv = 1.0 / dv if dv != 0.0 else np.inf
     sx = 1 if du > 0.0 else -1
     sy = stride if dv > 0.0 else -stride
     dtx, dty = abs(inv_du), abs(inv_dv)
-    t = t_lo
     u1, v1 = u0 + 1.0, v0 + 1.0  # shifted by the table's border
     while True:
         # the padded table's cell of a point inside [0, width] x [0, height] (up to rounding, so
@@ -101,10 +95,76 @@ def trace_ray(
             if c < 0.0:
                 return t
             if c >= WALK_EXIT:
+                # jump from the crossing point, which the cell just entered bounds (re-finding its
+                # cell by floor could pick the neighbour left behind and walk it again forever)
                 t += c
                 if t > t_hi:
                     return np.inf
                 break
+
+
+@njit(cache=True, nogil=True)
+def trace_ray(
+    clear: np.ndarray,
+    stride: int,
+    width: int,
+    height: int,
+    u0: float,
+    v0: float,
+    du: float,
+    dv: float,
+    t_max: float,
+) -> float:
+    """One ray in grid-local cell units (origin (u0, v0), unit direction (du, dv)): the entry
+    distance of the first occupied cell, 0 from inside one, inf if none is entered within
+    ``t_max``. Cells off the grid are free."""
+    t_lo, t_hi = ray_span(width, height, u0, v0, du, dv, t_max)
+    if t_lo > t_hi:
+        return np.inf
+    return trace_from(clear, stride, u0, v0, du, dv, t_lo, t_hi)
+
+
+@njit(cache=True, nogil=True)
+def trace_fan(
+    clear: np.ndarray,
+    stride: int,
+    width: int,
+    height: int,
+    u0: float,
+    v0: float,
+    du: np.ndarray,
+    dv: np.ndarray,
+    t_max: float,
+    t: np.ndarray,
+    t_hi: np.ndarray,
+    active: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """``trace_ray`` for rays sharing an origin (directions ``du``, ``dv``) into ``out``; ``t``,
+    ``t_hi`` and ``active`` are work arrays of the same length, reused across calls. The open
+    space jumps of all rays go first, in rounds over the rays still jumping: one ray's jumps
+    form a chain of dependent loads, and interleaving independent chains lets the CPU overlap
+    them. Each ray then finishes alone (``trace_from``: the cell walk near the obstacle)."""
+    n = 0
+    for k in range(du.shape[0]):
+        lo, hi = ray_span(width, height, u0, v0, du[k], dv[k], t_max)
+        t[k], t_hi[k] = lo, hi
+        active[n] = k
+        n += lo <= hi
+    u1, v1 = u0 + 1.0, v0 + 1.0
+    while n > 0:
+        m = 0
+        for j in range(n):
+            k = active[j]
+            tk = t[k]
+            c = clear[int(v1 + tk * dv[k]) * stride + int(u1 + tk * du[k])]
+            go = c >= JUMP_MIN and tk + c <= t_hi[k]
+            t[k] = tk + c if go else tk
+            active[m] = k
+            m += go
+        n = m
+    for k in range(du.shape[0]):
+        out[k] = np.inf if t[k] > t_hi[k] else trace_from(clear, stride, u0, v0, du[k], dv[k], t[k], t_hi[k])
 
 
 class ClearanceTracer:
