@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import distance_transform_edt
 
-from nav.localization.sphere_trace import BLOCKED, ClearanceTracer, trace_ray
+from nav.localization.sphere_trace import BLOCKED, ClearanceTracer, trace_fan, trace_ray
 from nav.raycast import RayCaster
 from nav.types import GridGeometry, Pose2D
 
@@ -59,6 +59,28 @@ def test_trace_equals_exact_column_walk(seed: int) -> None:
     hit = np.isfinite(want)
     assert hit.sum() > n // 10  # the seeds exercise hits, not only misses
     np.testing.assert_allclose(got[hit], want[hit], rtol=0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_fan_equals_single_rays(seed: int) -> None:
+    """``trace_fan`` (rays of one origin, jumps interleaved) gives every ray ``trace_ray``'s
+    result exactly, with its work arrays reused across origins (in walls, off the grid)."""
+    occ, geo = _random_mask(seed)
+    clear, stride, w, h = ClearanceTracer(occ, geo).tables
+    rng = np.random.default_rng(200 + seed)
+    b = 61
+    work = [np.empty(b) for _ in range(3)]
+    active = np.empty(b, dtype=np.int64)
+    for _ in range(200):
+        u0, v0 = rng.uniform(-0.3, 1.3) * w, rng.uniform(-0.3, 1.3) * h
+        a = rng.uniform(-np.pi, np.pi) + np.linspace(-np.pi, np.pi, b)
+        a[::10] = rng.integers(-4, 5, a[::10].size) * (np.pi / 4)
+        du, dv = np.cos(a), np.sin(a)
+        t_max = float(rng.uniform(5.0, 1.5 * max(w, h)))
+        t, t_hi, out = work
+        trace_fan(clear, stride, w, h, u0, v0, du, dv, t_max, t, t_hi, active, out)
+        want = [trace_ray(clear, stride, w, h, u0, v0, x, y, t_max) for x, y in zip(du, dv, strict=True)]
+        np.testing.assert_array_equal(out, want)
 
 
 def test_trace_on_empty_and_full_grids() -> None:
