@@ -13,8 +13,9 @@ from nav.types import GridGeometry, Pose2D
 
 
 def _random_mask(seed: int) -> tuple[np.ndarray, GridGeometry]:
-    """Rooms of random boxes and scattered single cells on a non-square grid, rotated origin for
-    odd seeds (the tracer works in grid-local cells, like the column walk)."""
+    """Rooms of random boxes, scattered single cells and one-cell diagonal walls (which a march
+    by the plain distance field leaks through) on a non-square grid, rotated origin for odd
+    seeds (the tracer works in grid-local cells, like the column walk)."""
     rng = np.random.default_rng(seed)
     h, w = int(rng.integers(40, 140)), int(rng.integers(40, 140))
     occ = rng.random((h, w)) < rng.uniform(0.0, 0.03)
@@ -22,6 +23,12 @@ def _random_mask(seed: int) -> tuple[np.ndarray, GridGeometry]:
     for _ in range(int(rng.integers(0, 12))):
         r, c = rng.integers(0, h), rng.integers(0, w)
         occ[r : r + rng.integers(1, 20), c : c + rng.integers(1, 4)] = True
+    for _ in range(int(rng.integers(1, 5))):  # one-cell diagonal walls: cells touching at corners
+        r, c, n = rng.integers(0, h), rng.integers(0, w), int(rng.integers(5, 40))
+        step = 1 if rng.random() < 0.5 else -1
+        rr, cc = r + np.arange(n), c + step * np.arange(n)
+        keep = (rr < h) & (cc >= 0) & (cc < w)
+        occ[rr[keep], cc[keep]] = True
     theta = 0.0 if seed % 2 == 0 else 0.4
     return occ, GridGeometry(0.05, w, h, Pose2D(-1.0, 2.0, theta))
 
