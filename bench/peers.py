@@ -379,6 +379,9 @@ def _match_row(
 AMCL_PARTICLES = 2000
 DWA_SIZE_ROUNDS = 101
 SIM_ROUNDS = 31  # a step is ~1 ms: more rounds than ROUNDS against the shared machine's noise
+# An update is ~15-20 ms of CPU, 60-120 ms of wall time on the loaded 2-core machine: 7 rounds
+# gave beam-model ratios 0.88-1.12 for one build, so this row takes more
+AMCL_ROUNDS = 31
 AMCL_TRUTH = np.array([[14.0, 33.0, 0.3], [14.1, 33.0, 0.3]])  # a room of Willow Garage (0.1 m map)
 
 
@@ -420,7 +423,7 @@ def _amcl_rows(amcl: ModuleType | None) -> list[Row]:
             rows.append(Row(kernel, _single(ours), peer, None))
             continue
         theirs = _nav2_amcl_update(amcl, grid, scans, o)
-        a, b = alternating_medians(ours, theirs)
+        a, b = alternating_medians(ours, theirs, rounds=AMCL_ROUNDS)
         rows.append(Row(kernel, a, "Nav2 AMCL via PyPI amcl", b))
     return rows
 
