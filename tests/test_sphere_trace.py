@@ -119,6 +119,15 @@ def test_clearance_table_is_a_lower_bound(seed: int) -> None:
     assert table.max() >= exact.max() - 1e-3  # uncapped
 
 
+def test_non_finite_rays_read_no_return() -> None:
+    """A NaN or infinite origin (a corrupted particle) gives no return, without indexing the
+    table with it."""
+    occ, geo = _random_mask(0)
+    clear, stride, w, h = ClearanceTracer(occ, geo).tables
+    for u0, v0, du in ((np.nan, 5.0, 1.0), (5.0, np.inf, 1.0), (5.0, 5.0, np.nan)):
+        assert trace_ray(clear, stride, w, h, u0, v0, du, 0.0, 50.0) == np.inf
+
+
 def test_mask_shape_must_match() -> None:
     with pytest.raises(ValueError, match="mask shape"):
         ClearanceTracer(np.zeros((3, 4), dtype=bool), GridGeometry(0.1, 3, 4, Pose2D()))

@@ -35,7 +35,10 @@ def ray_span(
 ) -> tuple[float, float]:
     """(t_lo, t_hi): the part of a ray within ``t_max`` inside the grid's box [0, width] x [0,
     height] (slab test), empty if t_lo > t_hi. The grid is convex: a ray that leaves it never
-    comes back, and off it every cell is free."""
+    comes back, and off it every cell is free. A NaN or infinite origin or direction has an
+    empty span: the walk must never index the table with one."""
+    if not (math.isfinite(u0) and math.isfinite(v0) and math.isfinite(du) and math.isfinite(dv)):
+        return np.inf, -np.inf
     t_lo, t_hi = 0.0, t_max
     if du != 0.0:
         ta, tb = -u0 / du, (width - u0) / du
