@@ -34,6 +34,55 @@ def _crop_to_seen(layer: SubmapLayer, res: float) -> SubmapLayer:
     return pose, origin + np.array([c0, r0], dtype=float) * res, lo[r0:r1, c0:c1], sn[r0:r1, c0:c1]
 
 
+SURFACE_SAMPLE = 0.25
+"""Where, in cells from a map cell's centre, :func:`_surface_wins` also looks into a submap."""
+
+
+def _lookup(
+    pose: Pose2D,
+    origin: np.ndarray,
+    lo: np.ndarray,
+    sn: np.ndarray,
+    gx: np.ndarray,
+    gy: np.ndarray,
+    res: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Log-odds (0 where not observed) and observed mask of the submap cells under map points."""
+    cth, sth = math.cos(pose.theta), math.sin(pose.theta)
+    dx, dy = gx - pose.x, gy - pose.y
+    sc = np.floor((cth * dx + sth * dy - origin[0]) / res).astype(np.int64)
+    sr = np.floor((-sth * dx + cth * dy - origin[1]) / res).astype(np.int64)
+    ok = (sr >= 0) & (sr < lo.shape[0]) & (sc >= 0) & (sc < lo.shape[1])
+    sr, sc = np.where(ok, sr, 0), np.where(ok, sc, 0)
+    ok &= sn[sr, sc]
+    return np.where(ok, lo[sr, sc], 0.0), ok
+
+
+def _surface_wins(
+    pose: Pose2D,
+    origin: np.ndarray,
+    lo: np.ndarray,
+    sn: np.ndarray,
+    xx: np.ndarray,
+    yy: np.ndarray,
+    res: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A submap's contribution to the map cells centred at (xx, yy): the submap cell under the
+    centre, unless the map cell also covers an occupied submap cell (looked up a quarter cell from
+    the centre towards each corner), then the most occupied of those. The two lattices are offset
+    and rotated, so a map cell often straddles a wall's face: nearest-neighbour resampling made it
+    free when its centre fell on the free side, though part of it is the wall (a cell with a
+    surface in it is occupied, as a hit wins over a pass-through when a scan is inserted)."""
+    val, ok = _lookup(pose, origin, lo, sn, xx, yy, res)
+    best = np.full(val.shape, -np.inf, dtype=np.float64)
+    q = SURFACE_SAMPLE * res
+    for sx, sy in ((-q, -q), (q, -q), (-q, q), (q, q)):
+        v, o = _lookup(pose, origin, lo, sn, xx + sx, yy + sy, res)
+        best = np.where(o & (v > best), v, best)
+    surface = best > 0.0
+    return np.where(surface, best, val), ok | surface
+
+
 def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOddsGrid:
     """Sum the submaps' log-odds into one grid in the map frame."""
     res = options.resolution
@@ -58,17 +107,9 @@ def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOdd
         gx = out.origin[0] + (cols + 0.5) * res
         gy = out.origin[1] + (rows + 0.5) * res
         xx, yy = np.meshgrid(gx, gy)
-        cth, sth = math.cos(pose.theta), math.sin(pose.theta)
-        dx, dy = xx - pose.x, yy - pose.y
-        lx = cth * dx + sth * dy
-        ly = -sth * dx + cth * dy
-        sc = np.floor((lx - origin[0]) / res).astype(np.int64)
-        sr = np.floor((ly - origin[1]) / res).astype(np.int64)
-        ok = (sr >= 0) & (sr < lo.shape[0]) & (sc >= 0) & (sc < lo.shape[1])
-        sr, sc = np.where(ok, sr, 0), np.where(ok, sc, 0)
-        ok &= sn[sr, sc]
+        val, ok = _surface_wins(pose, origin, lo, sn, xx, yy, res)
         sub = (slice(c0[1], c1[1]), slice(c0[0], c1[0]))
-        acc[sub] += np.where(ok, lo[sr, sc], 0.0)
+        acc[sub] += val
         seen[sub] |= ok
     # cut to the observed cells: the corners of rotated submaps span more than they observed
     rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))

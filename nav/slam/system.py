@@ -39,7 +39,7 @@ from nav.slam.matcher import (
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
 from nav.slam.render import render_submaps
 from nav.slam.submap import Submap
-from nav.types import LaserScan, OccupancyGrid, Pose2D
+from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
 _IDENTITY = Pose2D()
 
@@ -223,6 +223,17 @@ class SlamOptions:
     """Smaller estimated lags (s) are not worth a restart."""
     odometry_lag_max: float = 0.3
     """Lags searched (s), both signs."""
+    heading_drift_time_constant: float = 20.0
+    """Odometry heading drift (a gyro's bias, rad/s) is estimated from the matches and removed from
+    the prediction; each node's heading correction moves the estimate by ``correction /
+    time_constant`` (s; 0 = off). Why: near a correct prediction the likelihood field is flat (its
+    Gaussian has no slope at distance 0) and the correlative lattice is 0.5 deg, so a match keeps
+    little of a heading offset smaller than that, and a drifting prediction is followed: on the
+    office's full loop the skid4 gyro's 0.002 rad/s bias turned into 2.8 deg of front-end heading
+    drift and corridor walls built 0.1-0.27 m off (docs/slam.md, "No ghost free space")."""
+    heading_drift_max: float = 0.05
+    """Bound (rad/s) on the estimated heading drift (an MPU6050's bias after calibration is
+    ~0.002-0.01 rad/s): a run of bad matches cannot make the prediction turn by itself."""
 
     def grid_options(self) -> LogOddsOptions:
         return LogOddsOptions(resolution=self.resolution, grow_margin=2.0)
@@ -312,6 +323,8 @@ class GraphSlam:
         self._last_node_odom: Pose2D | None = None
         self._last_node_stamp = -math.inf
         self._correction = Pose2D()  # map <- local
+        self._heading_drift = 0.0  # estimated odometry heading drift (rad/s), removed from predictions
+        self._last_stamp: float | None = None
         self._optimized_upto = 0  # nodes [0, n) have optimized map poses
         self._searched_upto = 0
         self._seen_at: dict[int, int] = {}  # submap -> newest node loop-closed with it (back end)
@@ -336,8 +349,12 @@ class GraphSlam:
             if self._last_odom is None:
                 pred = Pose2D()
             else:
-                pred = self._last_local.compose(odom_pose.relative_to(self._last_odom))
+                step = odom_pose.relative_to(self._last_odom)
+                dt = float(scan.stamp) - self._last_stamp if self._last_stamp is not None else 0.0
+                step = Pose2D(step.x, step.y, step.theta - self._heading_drift * max(dt, 0.0))
+                pred = self._last_local.compose(step)
             self._last_odom = odom_pose
+            self._last_stamp = float(scan.stamp)
             moved = self._last_node_odom is None or (
                 odom_pose.distance_to(self._last_node_odom) >= o.minimum_travel_distance
                 or abs(odom_pose.relative_to(self._last_node_odom).theta) >= o.minimum_travel_heading
@@ -378,6 +395,7 @@ class GraphSlam:
         if pts_laser.shape[0] < 3:  # nothing to match or insert: dead-reckon on odometry
             return pred
         local, match_pts = self._match(pts_laser, pred, laser_pose)
+        self._track_heading_drift(local, pred)
         index = len(self._nodes)
         node = _Node(float(scan.stamp), local, match_pts)
         self._nodes.append(node)
@@ -397,6 +415,17 @@ class GraphSlam:
                     sm.finished = True
                     sm.release_field()
         return local
+
+    def _track_heading_drift(self, match: Pose2D, pred: Pose2D) -> None:
+        """Move the odometry heading-drift estimate by the node's heading correction over the time
+        constant (an integrator: it settles where matches no longer correct the prediction's
+        heading on average). Poor matches (below the wide-search score) are not trusted."""
+        o = self.options
+        if o.heading_drift_time_constant <= 0.0 or not self.last_score >= o.wide_search_minimum_score:
+            return
+        correction = float(wrap_angle(match.theta - pred.theta))
+        drift = self._heading_drift - correction / o.heading_drift_time_constant
+        self._heading_drift = float(np.clip(drift, -o.heading_drift_max, o.heading_drift_max))
 
     def _match(self, pts_laser: np.ndarray, pred: Pose2D, laser_pose: Pose2D) -> tuple[Pose2D, np.ndarray]:
         """Front-end pose of a scan (laser-frame hits) predicted at ``pred``, and its matching points."""
