@@ -18,27 +18,157 @@ from numba import njit
 
 
 @njit(cache=True, nogil=True)
+def _block_sum32(v: np.ndarray, lo: int, n: int) -> np.float32:
+    """numpy's float32 sum of a block of n <= 128 values: sequential below 8, else 8 interleaved
+    partial sums combined as a tree, then the n % 8 rest added in order."""
+    if n < 8:
+        res = np.float32(0.0)
+        for i in range(n):
+            res += v[lo + i]
+        return res
+    r0, r1, r2, r3 = v[lo], v[lo + 1], v[lo + 2], v[lo + 3]
+    r4, r5, r6, r7 = v[lo + 4], v[lo + 5], v[lo + 6], v[lo + 7]
+    i = 8
+    while i < n - n % 8:
+        r0 += v[lo + i]
+        r1 += v[lo + i + 1]
+        r2 += v[lo + i + 2]
+        r3 += v[lo + i + 3]
+        r4 += v[lo + i + 4]
+        r5 += v[lo + i + 5]
+        r6 += v[lo + i + 6]
+        r7 += v[lo + i + 7]
+        i += 8
+    res = ((r0 + r1) + (r2 + r3)) + ((r4 + r5) + (r6 + r7))
+    while i < n:
+        res += v[lo + i]
+        i += 1
+    return res
+
+
+@njit(cache=True, nogil=True)
+def pairwise_sum32(v: np.ndarray, lo: int, n: int) -> np.float32:
+    """Sum of float32 ``v[lo:lo + n]`` in float32, in numpy's order (``pairwise_sum`` of
+    numpy/_core/src/umath/loops_utils.h.src: blocks of <= 128 by :func:`_block_sum32`, longer runs
+    split in halves rounded down to a multiple of 8), so the result is bit-identical to
+    ``v[lo:lo + n].sum()`` and to a row of ``array.sum(axis=1)``. Scores equal to the bit keep
+    ties (the field's values come from a handful of kernel weights, so equal sums are common)
+    breaking as in the numpy reference. numpy recurses; this walks the same tree with a stack
+    (numba's cached functions cannot call a recursive one)."""
+    if n <= 128:
+        return _block_sum32(v, lo, n)
+    los = np.empty(128, dtype=np.int64)  # pending nodes; the tree is ~log2(n) deep
+    ns = np.empty(128, dtype=np.int64)
+    split = np.zeros(128, dtype=np.bool_)
+    sums = np.empty(128, dtype=np.float32)  # finished subtrees' sums
+    top, nsum = 1, 0
+    los[0], ns[0] = lo, n
+    while top > 0:
+        k = top - 1
+        if ns[k] <= 128:
+            sums[nsum] = _block_sum32(v, los[k], ns[k])
+            nsum += 1
+            top -= 1
+        elif split[k]:  # both halves done: left + right
+            sums[nsum - 2] = sums[nsum - 2] + sums[nsum - 1]
+            nsum -= 1
+            split[k] = False
+            top -= 1
+        else:
+            n2 = ns[k] // 2
+            n2 -= n2 % 8
+            split[k] = True
+            los[top], ns[top] = los[k] + n2, ns[k] - n2  # right half, done second
+            los[top + 1], ns[top + 1] = los[k], n2  # left half, popped first
+            split[top] = split[top + 1] = False
+            top += 2
+    return sums[0]
+
+
+@njit(cache=True, nogil=True)
 def score_candidates(
     grid: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, cand: np.ndarray, step: int
 ) -> np.ndarray:
-    """Mean of ``grid`` at the points of each candidate ``(angle index, dy, dx)`` (offsets in units
-    of ``step`` cells); ``rows0`` / ``cols0`` (A, N) are the points' cells at each angle and zero
-    offset. Cells outside the grid count 0."""
+    """float32 mean of ``grid`` at the points of each candidate ``(angle index, dy, dx)`` (offsets
+    in units of ``step`` cells); ``rows0`` / ``cols0`` (A, N) are the points' cells at each angle
+    and zero offset. Cells outside the grid count 0. Summed as numpy sums (:func:`pairwise_sum32`)."""
     h, w = grid.shape
     n = rows0.shape[1]
-    out = np.empty(cand.shape[0], dtype=np.float64)
+    out = np.empty(cand.shape[0], dtype=np.float32)
+    vals = np.empty(n, dtype=np.float32)
+    nf = np.float32(n)
     for k in range(cand.shape[0]):
         a = cand[k, 0]
         dy = cand[k, 1] * step
         dx = cand[k, 2] * step
-        acc = 0.0
         for i in range(n):
             r = rows0[a, i] + dy
             c = cols0[a, i] + dx
-            if 0 <= r < h and 0 <= c < w:
-                acc += grid[r, c]
-        out[k] = acc / n
+            vals[i] = grid[r, c] if 0 <= r < h and 0 <= c < w else np.float32(0.0)
+        out[k] = pairwise_sum32(vals, 0, n) / nf
     return out
+
+
+@njit(cache=True, nogil=True)
+def _block_sums(
+    grid: np.ndarray,
+    r0s: np.ndarray,
+    c0s: np.ndarray,
+    side: int,
+    step: int,
+    part: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """``out[j, k]`` = float32 sum over the points i of ``grid[r0s[i] + j step, c0s[i] + k step]``
+    (0 outside), in numpy's pairwise order. Olson's layout: each point adds its whole
+    ``side x side`` block at once (row-contiguous reads when ``step`` is 1); with <= 128 points
+    point i goes to partial sum ``i % 8`` (``part``, (8, side, side)), as numpy's unrolled sum does;
+    more points fall back to gathering each offset's values and :func:`pairwise_sum32`."""
+    h, w = grid.shape
+    n = r0s.shape[0]
+    zero = np.float32(0.0)
+    if n > 128:
+        vals = np.empty(n, dtype=np.float32)
+        for j in range(side):
+            for k in range(side):
+                for i in range(n):
+                    r = r0s[i] + j * step
+                    c = c0s[i] + k * step
+                    vals[i] = grid[r, c] if 0 <= r < h and 0 <= c < w else zero
+                out[j, k] = pairwise_sum32(vals, 0, n)
+        return
+    n8 = n - n % 8 if n >= 8 else 0
+    part[:] = zero
+    span = (side - 1) * step
+    for i in range(n8):
+        acc = part[i % 8]
+        r0, c0 = r0s[i], c0s[i]
+        if r0 >= 0 and c0 >= 0 and r0 + span < h and c0 + span < w:  # the usual case
+            for j in range(side):
+                for k in range(side):
+                    acc[j, k] += grid[r0 + j * step, c0 + k * step]
+            continue
+        for j in range(side):
+            r = r0 + j * step
+            if 0 <= r < h:
+                for k in range(side):
+                    c = c0 + k * step
+                    if 0 <= c < w:
+                        acc[j, k] += grid[r, c]
+    for j in range(side):
+        for k in range(side):
+            if n8 > 0:
+                res = ((part[0, j, k] + part[1, j, k]) + (part[2, j, k] + part[3, j, k])) + (
+                    (part[4, j, k] + part[5, j, k]) + (part[6, j, k] + part[7, j, k])
+                )
+            else:
+                res = zero
+            for i in range(n8, n):
+                r = r0s[i] + j * step
+                c = c0s[i] + k * step
+                if 0 <= r < h and 0 <= c < w:  # outside adds 0: exact, so skipped
+                    res += grid[r, c]
+            out[j, k] = res
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -171,57 +301,48 @@ def exhaustive_search(
 ) -> tuple[int, int, int, float, float]:
     """The exhaustive (single-level) correlative search in one pass: every angle ``a`` (its cos /
     sin given), every cell offset (dy, dx) in [-wc, wc]^2. Returns the best (a, dy, dx), its
-    score (mean ``grid`` value, 0 outside) and the best score of the candidates more than
-    ``separation`` (m) from it (0 if none). Ties go to the candidate nearest the prior
-    (|dy| + |dx| + |a - centre|), then to the first in (a, dy, dx) order, as in
-    ``matcher.correlative_search_reference``."""
-    h, w = grid.shape
+    score (float32 mean ``grid`` value, 0 outside, summed as numpy sums) and the best score of the
+    candidates more than ``separation`` (m) from it (0 if none; not searched when ``separation``
+    is infinite). Ties go to the candidate nearest the prior (|dy| + |dx| + |a - centre|), then to
+    the first in (a, dy, dx) order, as in ``matcher.correlative_search_reference``."""
     n = pts.shape[0]
     na = cos_t.shape[0]
     side = 2 * wc + 1
-    scores = np.empty((na, side, side))
-    acc = np.empty((side, side))
+    runner = separation < math.inf
+    scores = np.empty((na if runner else 1, side, side), dtype=np.float32)
+    part = np.empty((8, side, side), dtype=np.float32)
+    sums = np.empty((side, side), dtype=np.float32)
+    r0s = np.empty(n, dtype=np.int64)
+    c0s = np.empty(n, dtype=np.int64)
+    nf = np.float32(n)
     centre = (na - 1) // 2
-    best = -1.0
+    best = np.float32(-1.0)
     best_dist = 0
     ba = bdy = bdx = 0
     for a in range(na):
         c, s = cos_t[a], sin_t[a]
-        # Olson's layout: each point adds the (2 wc + 1)^2 block of cells around it to the sums
-        # of all offsets at once (row-contiguous reads); per offset the points still add in order
-        acc[:] = 0.0
-        for i in range(n):
+        for i in range(n):  # the same float64 operations as the reference's numpy expression
             x = c * pts[i, 0] - s * pts[i, 1] + px
             y = s * pts[i, 0] + c * pts[i, 1] + py
-            c0 = math.floor((x - ox) / res) - wc
-            r0 = math.floor((y - oy) / res) - wc
-            if r0 >= 0 and c0 >= 0 and r0 + side <= h and c0 + side <= w:  # the usual case
-                for j in range(side):
-                    for k in range(side):
-                        acc[j, k] += grid[r0 + j, c0 + k]
-                continue
-            for j in range(side):
-                r = r0 + j
-                if r < 0 or r >= h:
-                    continue
-                for k in range(side):
-                    cc = c0 + k
-                    if 0 <= cc < w:
-                        acc[j, k] += grid[r, cc]
+            c0s[i] = math.floor((x - ox) / res) - wc
+            r0s[i] = math.floor((y - oy) / res) - wc
+        _block_sums(grid, r0s, c0s, side, 1, part, sums)
         for j in range(side):
             for k in range(side):
-                sc = acc[j, k] / n
-                scores[a, j, k] = sc
+                sc = sums[j, k] / nf
+                if runner:
+                    scores[a, j, k] = sc
                 dist = abs(j - wc) + abs(k - wc) + abs(a - centre)
                 if sc > best or (sc == best and dist < best_dist):
                     best, best_dist, ba, bdy, bdx = sc, dist, a, j - wc, k - wc
-    runner_up = 0.0
-    for a in range(na):
-        for dy in range(-wc, wc + 1):
-            for dx in range(-wc, wc + 1):
-                if math.hypot(dy - bdy, dx - bdx) * res > separation:
-                    runner_up = max(runner_up, scores[a, dy + wc, dx + wc])
-    return ba, bdy, bdx, best, runner_up
+    runner_up = np.float32(0.0)
+    if runner:
+        for a in range(na):
+            for dy in range(-wc, wc + 1):
+                for dx in range(-wc, wc + 1):
+                    if math.hypot(dy - bdy, dx - bdx) * res > separation:
+                        runner_up = max(runner_up, scores[a, dy + wc, dx + wc])
+    return ba, bdy, bdx, float(best), float(runner_up)
 
 
 @njit(cache=True, nogil=True)
@@ -247,23 +368,17 @@ def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
 def block_scores(
     grid: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, lo: int, nb: int, step: int
 ) -> np.ndarray:
-    """(A, nb, nb) scores of the whole top level of a coarse-to-fine search: at angle ``a`` the
-    block offset (lo + j, lo + k) in units of ``step`` cells; the same sums as
-    :func:`score_candidates` over all (a, j, k), accumulated point by point (Olson's layout)."""
-    h, w = grid.shape
+    """(A, nb, nb) float32 scores of the whole top level of a coarse-to-fine search: at angle
+    ``a`` the block offset (lo + j, lo + k) in units of ``step`` cells; the same sums, bit for
+    bit, as :func:`score_candidates` over all (a, j, k), accumulated point by point (Olson's
+    layout, :func:`_block_sums`)."""
     na, n = rows0.shape
-    out = np.zeros((na, nb, nb))
+    out = np.empty((na, nb, nb), dtype=np.float32)
+    part = np.empty((8, nb, nb), dtype=np.float32)
+    nf = np.float32(n)
     for a in range(na):
-        acc = out[a]
-        for i in range(n):
-            r0 = rows0[a, i] + lo * step
-            c0 = cols0[a, i] + lo * step
-            for j in range(nb):
-                r = r0 + j * step
-                if r < 0 or r >= h:
-                    continue
-                for k in range(nb):
-                    c = c0 + k * step
-                    if 0 <= c < w:
-                        acc[j, k] += grid[r, c]
-    return out / n
+        _block_sums(grid, rows0[a] + lo * step, cols0[a] + lo * step, nb, step, part, out[a])
+        for j in range(nb):
+            for k in range(nb):
+                out[a, j, k] /= nf
+    return out

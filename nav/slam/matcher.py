@@ -92,9 +92,9 @@ def correlative_search_runner_up(
 def correlative_search_reference(
     field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow, separation: float
 ) -> tuple[Pose2D, float, float]:
-    """Pure-numpy reference of :func:`correlative_search_runner_up` (the tests compare the two; the
-    compiled path scores in float64, this one in the field's float32, so exact ties may break
-    differently)."""
+    """Pure-numpy reference of :func:`correlative_search_runner_up` (the tests compare the two: both
+    sum the field's float32 values in float32 in numpy's pairwise order, so scores, ties and the
+    chosen pose are bit-identical)."""
     return _correlative(field, pts, prior, window, separation, compiled=False)
 
 
