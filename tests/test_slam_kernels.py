@@ -159,13 +159,31 @@ def test_compiled_max_pooling_equals_the_reference(level: int) -> None:
     assert np.array_equal(field.pooled[level], field.pooled_reference(level))
 
 
-@pytest.mark.parametrize(("levels", "half_width"), [(2, 0.5), (4, 1.5)])
-def test_compiled_coarse_to_fine_search_equals_the_reference(levels: int, half_width: float) -> None:
+@pytest.mark.parametrize(
+    ("levels", "half_width", "max_points"), [(2, 0.5, 100), (4, 1.5, 100), (3, 0.5, 200)]
+)
+def test_compiled_coarse_to_fine_search_equals_the_reference(
+    levels: int, half_width: float, max_points: int
+) -> None:
     g, pts = _world_grid(30 + levels)
     field = LikelihoodField.from_grid(g, levels=levels)
     prior = Pose2D(0.3, -0.2, math.radians(8))
-    window = SearchWindow(half_width, math.radians(20), math.radians(0.5), levels=levels, beam=48)
+    window = SearchWindow(half_width, math.radians(20), math.radians(0.5), levels, 48, max_points)
     fast = correlative_search_runner_up(field, pts, prior, window, 0.5)
     ref = correlative_search_reference(field, pts, prior, window, 0.5)
     assert fast == ref  # pose, score and runner-up bit for bit
     assert math.hypot(fast[0].x, fast[0].y) < 0.06
+
+
+def test_compiled_rotated_cells_equal_numpys() -> None:
+    rng = np.random.default_rng(7)
+    pts = rng.uniform(-8, 8, (150, 2))
+    pts[:20] = np.round(pts[:20] / 0.05) * 0.05  # on cell borders: the floor must go the same way
+    thetas = 0.3 + math.radians(0.5) * np.arange(-40, 41)
+    origin = np.array([-10.0, -9.95])
+    rows, cols = kernels.rotated_cells(pts, np.cos(thetas), np.sin(thetas), 0.25, -0.1, *origin, 0.05)
+    c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+    x, y = pts[None, :, 0], pts[None, :, 1]
+    rot = np.stack((c * x - s * y, s * x + c * y), axis=-1) + np.array([0.25, -0.1])
+    cell = np.floor((rot - origin) / 0.05).astype(np.int64)
+    assert np.array_equal(rows, cell[..., 1]) and np.array_equal(cols, cell[..., 0])

@@ -110,21 +110,60 @@ def score_candidates(
 
 
 @njit(cache=True, nogil=True)
+def phase_split(grid: np.ndarray, step: int) -> np.ndarray:
+    """``phase[pr, pc, R, C] = grid[R step + pr, C step + pc]`` (zero past the grid's edge): cells
+    ``step`` (a power of 2, the pooled levels' block width) apart in ``grid`` are adjacent in one
+    phase. ``step`` 1 is the grid itself."""
+    h, w = grid.shape
+    if step < 1 or step & (step - 1):
+        raise ValueError("step must be a power of 2")
+    if step == 1:
+        return grid.reshape((1, 1, h, w))
+    phase = np.zeros((step, step, -(-h // step), -(-w // step)), dtype=grid.dtype)
+    for r in range(h):
+        for c in range(w):
+            phase[r % step, c % step, r // step, c // step] = grid[r, c]
+    return phase
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _add_block(g: np.ndarray, r0: int, c0: int, side: int, acc: np.ndarray) -> None:
+    """``acc[j, k] += g[r0 + j, c0 + k]`` over the ``side x side`` block, cells outside skipped."""
+    h, w = g.shape
+    if r0 >= 0 and c0 >= 0 and r0 + side <= h and c0 + side <= w:  # the usual case
+        for j in range(side):
+            for k in range(side):
+                acc[j, k] += g[r0 + j, c0 + k]
+        return
+    for j in range(side):
+        if 0 <= r0 + j < h:
+            for k in range(side):
+                if 0 <= c0 + k < w:
+                    acc[j, k] += g[r0 + j, c0 + k]
+
+
+@njit(cache=True, nogil=True)
 def _block_sums(
     grid: np.ndarray,
+    phase: np.ndarray,
     r0s: np.ndarray,
     c0s: np.ndarray,
     side: int,
-    step: int,
     part: np.ndarray,
     out: np.ndarray,
 ) -> None:
     """``out[j, k]`` = float32 sum over the points i of ``grid[r0s[i] + j step, c0s[i] + k step]``
-    (0 outside), in numpy's pairwise order. Olson's layout: each point adds its whole
-    ``side x side`` block at once (row-contiguous reads when ``step`` is 1); with <= 128 points
-    point i goes to partial sum ``i % 8`` (``part``, (8, side, side)), as numpy's unrolled sum does;
-    more points fall back to gathering each offset's values and :func:`pairwise_sum32`."""
+    (0 outside; ``phase`` is :func:`phase_split` of ``grid`` at ``step``), in numpy's pairwise
+    order. Olson's layout: each point adds its whole ``side x side`` block at once (contiguous
+    rows of its phase); with <= 128 points point i goes to partial sum ``i % 8`` (``part``,
+    (8, side, side)), as numpy's unrolled sum does; more points fall back to gathering each
+    offset's values and :func:`pairwise_sum32`."""
     h, w = grid.shape
+    step = phase.shape[0]
+    shift = 0  # steps are powers of 2: shift and mask floor-divide, no idiv per point
+    while (1 << shift) < step:
+        shift += 1
+    mask = step - 1
     n = r0s.shape[0]
     zero = np.float32(0.0)
     if n > 128:
@@ -139,22 +178,12 @@ def _block_sums(
         return
     n8 = n - n % 8 if n >= 8 else 0
     part[:] = zero
-    span = (side - 1) * step
     for i in range(n8):
-        acc = part[i % 8]
-        r0, c0 = r0s[i], c0s[i]
-        if r0 >= 0 and c0 >= 0 and r0 + span < h and c0 + span < w:  # the usual case
-            for j in range(side):
-                for k in range(side):
-                    acc[j, k] += grid[r0 + j * step, c0 + k * step]
-            continue
-        for j in range(side):
-            r = r0 + j * step
-            if 0 <= r < h:
-                for k in range(side):
-                    c = c0 + k * step
-                    if 0 <= c < w:
-                        acc[j, k] += grid[r, c]
+        if step == 1:
+            _add_block(grid, r0s[i], c0s[i], side, part[i % 8])
+        else:
+            g = phase[r0s[i] & mask, c0s[i] & mask]
+            _add_block(g, r0s[i] >> shift, c0s[i] >> shift, side, part[i % 8])
     for j in range(side):
         for k in range(side):
             if n8 > 0:
@@ -309,6 +338,7 @@ def exhaustive_search(
     na = cos_t.shape[0]
     side = 2 * wc + 1
     runner = separation < math.inf
+    phase = phase_split(grid, 1)
     scores = np.empty((na if runner else 1, side, side), dtype=np.float32)
     part = np.empty((8, side, side), dtype=np.float32)
     sums = np.empty((side, side), dtype=np.float32)
@@ -326,7 +356,7 @@ def exhaustive_search(
             y = s * pts[i, 0] + c * pts[i, 1] + py
             c0s[i] = math.floor((x - ox) / res) - wc
             r0s[i] = math.floor((y - oy) / res) - wc
-        _block_sums(grid, r0s, c0s, side, 1, part, sums)
+        _block_sums(grid, phase, r0s, c0s, side, part, sums)
         for j in range(side):
             for k in range(side):
                 sc = sums[j, k] / nf
@@ -348,19 +378,23 @@ def exhaustive_search(
 @njit(cache=True, nogil=True)
 def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
     """``out[r, c] = max(prev[r, c], prev[r + s, c], prev[r, c + s], prev[r + s, c + s])`` (zero
-    outside): the next max-pooled level, each cell the max over a block twice as wide."""
+    outside): the next max-pooled level, each cell the max over a block twice as wide. Separable
+    (a max along rows, then along columns: max is exact, so the order changes nothing) with
+    branch-free contiguous inner loops."""
     h, w = prev.shape
-    out = np.empty_like(prev)
+    rows = np.empty_like(prev)
     for r in range(h):
+        for c in range(w - s):
+            rows[r, c] = max(prev[r, c], prev[r, c + s])
+        for c in range(max(w - s, 0), w):
+            rows[r, c] = max(prev[r, c], np.float32(0.0))
+    out = np.empty_like(prev)
+    for r in range(h - s):
         for c in range(w):
-            v = prev[r, c]
-            if r + s < h:
-                v = max(v, prev[r + s, c])
-                if c + s < w:
-                    v = max(v, prev[r + s, c + s])
-            if c + s < w:
-                v = max(v, prev[r, c + s])
-            out[r, c] = v
+            out[r, c] = max(rows[r, c], rows[r + s, c])
+    for r in range(max(h - s, 0), h):
+        for c in range(w):
+            out[r, c] = max(rows[r, c], np.float32(0.0))
     return out
 
 
@@ -370,15 +404,44 @@ def block_scores(
 ) -> np.ndarray:
     """(A, nb, nb) float32 scores of the whole top level of a coarse-to-fine search: at angle
     ``a`` the block offset (lo + j, lo + k) in units of ``step`` cells; the same sums, bit for
-    bit, as :func:`score_candidates` over all (a, j, k), accumulated point by point (Olson's
-    layout, :func:`_block_sums`)."""
+    bit, as :func:`score_candidates` over all (a, j, k), accumulated point by point on the grid's
+    phases (Olson's layout, :func:`_block_sums`)."""
     na, n = rows0.shape
+    phase = phase_split(grid, step)
     out = np.empty((na, nb, nb), dtype=np.float32)
     part = np.empty((8, nb, nb), dtype=np.float32)
     nf = np.float32(n)
     for a in range(na):
-        _block_sums(grid, rows0[a] + lo * step, cols0[a] + lo * step, nb, step, part, out[a])
+        _block_sums(grid, phase, rows0[a] + lo * step, cols0[a] + lo * step, nb, part, out[a])
         for j in range(nb):
             for k in range(nb):
                 out[a, j, k] /= nf
     return out
+
+
+@njit(cache=True, nogil=True)
+def rotated_cells(
+    pts: np.ndarray,
+    cos_t: np.ndarray,
+    sin_t: np.ndarray,
+    px: float,
+    py: float,
+    ox: float,
+    oy: float,
+    res: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(A, N) rows and columns of the grid cells of points ``pts`` rotated by each angle (its cos /
+    sin given, from numpy so both sides use the same values) and moved to (px, py): the same
+    float64 operations in the same order as ``matcher._rotations`` and the numpy floor that
+    follows it, so the cells are identical (a tie at a cell border goes the same way)."""
+    na, n = cos_t.shape[0], pts.shape[0]
+    rows = np.empty((na, n), dtype=np.int64)
+    cols = np.empty((na, n), dtype=np.int64)
+    for a in range(na):
+        c, s = cos_t[a], sin_t[a]
+        for i in range(n):
+            x = c * pts[i, 0] - s * pts[i, 1] + px
+            y = s * pts[i, 0] + c * pts[i, 1] + py
+            cols[a, i] = math.floor((x - ox) / res)
+            rows[a, i] = math.floor((y - oy) / res)
+    return rows, cols

@@ -131,9 +131,21 @@ def _correlative(
         )
         pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
         return pose, float(best), float(runner_up)
-    rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2) at zero offset
-    cell = np.floor((rot - field.origin) / res).astype(np.int64)
-    rows0, cols0 = np.ascontiguousarray(cell[..., 1]), np.ascontiguousarray(cell[..., 0])  # (A, N)
+    if compiled:  # (A, N) cells of the points at each angle and zero offset
+        rows0, cols0 = kernels.rotated_cells(
+            np.ascontiguousarray(pts, dtype=np.float64),
+            np.cos(thetas),
+            np.sin(thetas),
+            prior.x,
+            prior.y,
+            float(field.origin[0]),
+            float(field.origin[1]),
+            res,
+        )
+    else:
+        rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2)
+        cell = np.floor((rot - field.origin) / res).astype(np.int64)
+        rows0, cols0 = cell[..., 1], cell[..., 0]
     top = window.levels
     field.ensure_levels(top)
     s = 1 << top
