@@ -61,6 +61,17 @@ def test_field_from_points_marks_the_cells_hit() -> None:
         LikelihoodField.from_points(np.zeros((0, 2)), 0.05)
 
 
+@pytest.mark.parametrize("seed", [0, 1])
+def test_compiled_field_from_points_equals_the_reference(seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-6, 9, (180, 2))
+    pts[:30] = np.round(pts[:30] / 0.05) * 0.05  # on cell borders
+    fast = LikelihoodField.from_points(pts, 0.05, sigma=0.05, margin=0.5)
+    ref = LikelihoodField.from_points_reference(pts, 0.05, sigma=0.05, margin=0.5)
+    assert np.array_equal(fast.origin, ref.origin)
+    assert fast.field.dtype == ref.field.dtype and np.array_equal(fast.field, ref.field)
+
+
 def test_pairwise_float32_sum_is_numpys_sum_bit_for_bit() -> None:
     rng = np.random.default_rng(0)
     for n in [*range(0, 140), 255, 256, 257, 1000]:

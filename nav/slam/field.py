@@ -64,15 +64,30 @@ class LikelihoodField:
     ) -> LikelihoodField:
         """Field of the cells hit by (N, 2) ``points`` (scan-to-scan matching: the reference
         scan's returns in its own frame), on a grid covering them plus ``margin`` (m); no free
-        space is traced (the field only needs the occupied cells)."""
+        space is traced (the field only needs the occupied cells). One compiled call
+        (:func:`nav.slam.kernels.points_field`; numpy reference :meth:`from_points_reference`)."""
+        if points.shape[0] == 0:
+            raise ValueError("no points to build a likelihood field from")
+        f, lox, loy = kernels.points_field(
+            np.ascontiguousarray(points, dtype=np.float64), resolution, margin, _kernel(sigma, resolution)
+        )
+        obj = cls(f, np.array([lox, loy]), resolution, levels)
+        obj.sigma = sigma
+        return obj
+
+    @classmethod
+    def from_points_reference(
+        cls, points: np.ndarray, resolution: float, sigma: float = 0.05, margin: float = 0.5
+    ) -> LikelihoodField:
+        """Pure-numpy reference of :meth:`from_points` (the tests compare the two)."""
         if points.shape[0] == 0:
             raise ValueError("no points to build a likelihood field from")
         lo = np.floor((points.min(axis=0) - margin) / resolution) * resolution
         shape = np.floor((points.max(axis=0) + margin - lo) / resolution).astype(np.int64) + 1
         cells = np.floor((points - lo) / resolution).astype(np.int64)
-        f = np.zeros((int(shape[1]), int(shape[0])), dtype=np.float32)
-        kernels.splat(f, cells[:, 1].copy(), cells[:, 0].copy(), _kernel(sigma, resolution))
-        obj = cls(f, lo, resolution, levels)
+        occupied = np.zeros((int(shape[1]), int(shape[0])), dtype=bool)
+        occupied[cells[:, 1], cells[:, 0]] = True
+        obj = cls(field_reference(occupied, sigma, resolution), lo, resolution)
         obj.sigma = sigma
         return obj
 

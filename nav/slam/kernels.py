@@ -445,3 +445,31 @@ def rotated_cells(
             cols[a, i] = math.floor((x - ox) / res)
             rows[a, i] = math.floor((y - oy) / res)
     return rows, cols
+
+
+@njit(cache=True, nogil=True)
+def points_field(
+    points: np.ndarray, resolution: float, margin: float, kernel: np.ndarray
+) -> tuple[np.ndarray, float, float]:
+    """The likelihood field of the cells hit by (N, 2) ``points`` on a grid covering them plus
+    ``margin``, and the grid's origin (x, y), in one call: the same float64 operations as
+    ``LikelihoodField.from_points_reference``'s numpy expressions (so the same origin and cells),
+    then :func:`splat` of ``kernel``."""
+    lo = np.empty(2)
+    hi = np.empty(2)
+    for d in range(2):
+        mn, mx = points[0, d], points[0, d]
+        for i in range(1, points.shape[0]):
+            mn = min(mn, points[i, d])
+            mx = max(mx, points[i, d])
+        lo[d] = math.floor((mn - margin) / resolution) * resolution
+        hi[d] = math.floor((mx + margin - lo[d]) / resolution) + 1
+    field = np.zeros((int(hi[1]), int(hi[0])), dtype=np.float32)
+    n = points.shape[0]
+    rows = np.empty(n, dtype=np.int64)
+    cols = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        cols[i] = math.floor((points[i, 0] - lo[0]) / resolution)
+        rows[i] = math.floor((points[i, 1] - lo[1]) / resolution)
+    splat(field, rows, cols, kernel)
+    return field, lo[0], lo[1]

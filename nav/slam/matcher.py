@@ -12,6 +12,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -53,6 +54,14 @@ class RefineOptions:
     rotation_weight: float = 40.0
     max_iterations: int = 20
     tolerance: float = 1e-5
+
+
+@functools.lru_cache(maxsize=64)
+def _thinned(n: int, m: int) -> np.ndarray:
+    """Indices of ``m`` of ``n`` points, evenly spread (cached: the same few scan sizes recur)."""
+    idx = np.linspace(0, n - 1, m).astype(np.int64)
+    idx.setflags(write=False)
+    return idx
 
 
 def _rotations(pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
@@ -110,7 +119,7 @@ def _correlative(
     if pts.shape[0] == 0:
         raise ScanMatchError("no points to match")
     if pts.shape[0] > window.max_points:
-        pts = pts[np.linspace(0, pts.shape[0] - 1, window.max_points).astype(np.int64)]
+        pts = pts[_thinned(pts.shape[0], window.max_points)]
     res = field.resolution
     na = math.ceil(window.angular_search_window / window.angular_step)
     thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
