@@ -198,3 +198,17 @@ def test_compiled_rotated_cells_equal_numpys() -> None:
     rot = np.stack((c * x - s * y, s * x + c * y), axis=-1) + np.array([0.25, -0.1])
     cell = np.floor((rot - origin) / 0.05).astype(np.int64)
     assert np.array_equal(rows, cell[..., 1]) and np.array_equal(cols, cell[..., 0])
+
+
+@pytest.mark.parametrize("size", [40, 600])
+def test_compiled_top_level_scores_equal_the_reference_split_or_not(size: int) -> None:
+    # a small grid is split into phases first, a large one read in place: the same sums either way
+    rng = np.random.default_rng(size)
+    field = LikelihoodField(rng.random((size, size)).astype(np.float32), np.zeros(2), 0.05, levels=2)
+    rows0 = rng.integers(-8, size + 8, (3, 100))
+    cols0 = rng.integers(-8, size + 8, (3, 100))
+    fast = kernels.block_scores(field.pooled[2], rows0, cols0, -3, 6, 4)
+    a_idx, by, bx = np.meshgrid(np.arange(3), np.arange(-3, 3), np.arange(-3, 3), indexing="ij")
+    cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
+    ref = score_candidates_reference(field, 2, rows0, cols0, cand, 4)
+    assert np.array_equal(fast.ravel(), ref)

@@ -133,25 +133,30 @@ def phase_split(grid: np.ndarray, step: int) -> np.ndarray:
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _add_block(g: np.ndarray, r0: int, c0: int, side: int, acc: np.ndarray) -> None:
-    """``acc[j, k] += g[r0 + j, c0 + k]`` over the ``side x side`` block, cells outside skipped."""
+def _add_block(g: np.ndarray, r0: int, c0: int, side: int, stride: int, acc: np.ndarray) -> None:
+    """``acc[j, k] += g[r0 + j stride, c0 + k stride]`` over the ``side x side`` block, cells
+    outside skipped."""
     h, w = g.shape
-    if r0 >= 0 and c0 >= 0 and r0 + side <= h and c0 + side <= w:  # the usual case
+    span = (side - 1) * stride
+    if r0 >= 0 and c0 >= 0 and r0 + span < h and c0 + span < w:  # the usual case
         for j in range(side):
             for k in range(side):
-                acc[j, k] += g[r0 + j, c0 + k]
+                acc[j, k] += g[r0 + j * stride, c0 + k * stride]
         return
     for j in range(side):
-        if 0 <= r0 + j < h:
+        r = r0 + j * stride
+        if 0 <= r < h:
             for k in range(side):
-                if 0 <= c0 + k < w:
-                    acc[j, k] += g[r0 + j, c0 + k]
+                c = c0 + k * stride
+                if 0 <= c < w:
+                    acc[j, k] += g[r, c]
 
 
 @njit(cache=True, nogil=True)
 def _block_sums(
     grid: np.ndarray,
     phase: np.ndarray,
+    step: int,
     r0s: np.ndarray,
     c0s: np.ndarray,
     side: int,
@@ -159,13 +164,13 @@ def _block_sums(
     out: np.ndarray,
 ) -> None:
     """``out[j, k]`` = float32 sum over the points i of ``grid[r0s[i] + j step, c0s[i] + k step]``
-    (0 outside; ``phase`` is :func:`phase_split` of ``grid`` at ``step``), in numpy's pairwise
+    (0 outside; ``phase`` is :func:`phase_split` of ``grid`` at ``step``, or at 1 to read the grid
+    itself ``step`` apart), in numpy's pairwise
     order. Olson's layout: each point adds its whole ``side x side`` block at once (contiguous
     rows of its phase); with <= 128 points point i goes to partial sum ``i % 8`` (``part``,
     (8, side, side)), as numpy's unrolled sum does; more points fall back to gathering each
     offset's values and :func:`pairwise_sum32`."""
     h, w = grid.shape
-    step = phase.shape[0]
     shift = 0  # steps are powers of 2: shift and mask floor-divide, no idiv per point
     while (1 << shift) < step:
         shift += 1
@@ -185,11 +190,11 @@ def _block_sums(
     n8 = n - n % 8 if n >= 8 else 0
     part[:] = zero
     for i in range(n8):
-        if step == 1:
-            _add_block(grid, r0s[i], c0s[i], side, part[i % 8])
+        if phase.shape[0] == 1:  # not split: cells ``step`` apart in the grid itself
+            _add_block(grid, r0s[i], c0s[i], side, step, part[i % 8])
         else:
             g = phase[r0s[i] & mask, c0s[i] & mask]
-            _add_block(g, r0s[i] >> shift, c0s[i] >> shift, side, part[i % 8])
+            _add_block(g, r0s[i] >> shift, c0s[i] >> shift, side, 1, part[i % 8])
     for j in range(side):
         for k in range(side):
             if n8 > 0:
@@ -362,7 +367,7 @@ def exhaustive_search(
             y = s * pts[i, 0] + c * pts[i, 1] + py
             c0s[i] = math.floor((x - ox) / res) - wc
             r0s[i] = math.floor((y - oy) / res) - wc
-        _block_sums(grid, phase, r0s, c0s, side, part, sums)
+        _block_sums(grid, phase, 1, r0s, c0s, side, part, sums)
         for j in range(side):
             for k in range(side):
                 sc = sums[j, k] / nf
@@ -413,12 +418,14 @@ def block_scores(
     bit, as :func:`score_candidates` over all (a, j, k), accumulated point by point on the grid's
     phases (Olson's layout, :func:`_block_sums`)."""
     na, n = rows0.shape
-    phase = phase_split(grid, step)
+    # splitting copies the grid once: worth it when the scoring reads more cells than it has (a
+    # scan-sized field), not for a large submap's (loop closure), which is read where it lies
+    phase = phase_split(grid, step if grid.size <= na * n * nb * nb else 1)
     out = np.empty((na, nb, nb), dtype=np.float32)
     part = np.empty((8, nb, nb), dtype=np.float32)
     nf = np.float32(n)
     for a in range(na):
-        _block_sums(grid, phase, rows0[a] + lo * step, cols0[a] + lo * step, nb, part, out[a])
+        _block_sums(grid, phase, step, rows0[a] + lo * step, cols0[a] + lo * step, nb, part, out[a])
         for j in range(nb):
             for k in range(nb):
                 out[a, j, k] /= nf
