@@ -13,6 +13,7 @@ from app.features.exploration import ENDED, ExplorationOptions, ExplorationRefus
 from app.features.navigation import NavigationRefused
 from app.modes import Mode
 from bench.explore import compare
+from nav.exploration import FrontierReport
 from nav.types import LETHAL_OBSTACLE, OccupancyGrid, Pose2D, Twist2D
 from robot.base import SensorFrame
 
@@ -277,6 +278,26 @@ def test_a_goal_the_robot_comes_no_closer_to_is_given_up_after_the_progress_time
         ends = [e for e in s.events if e["type"] == "navigation" and "outcome" in e]
         assert ends[0]["outcome"] == "cancelled" and ends[0]["actor"] == "explorer", ends[0]
         assert ex.explorer.banned_places == [goal] and ex.state == ExplorationState.EXPLORING
+    finally:
+        s.close()
+
+
+def test_a_frontier_is_judged_unobservable_only_on_a_map_published_after_arrival():
+    # office:1: a goal counted reached at 0.5 m was blacklisted as unobservable in the same tick,
+    # on the map of the arrival tick, before SLAM had put in what the lidar saw from there
+    stack = _stack()
+    s, ex, nav = stack.session, stack.exploration, stack.navigation
+    try:
+        ex.start()
+        assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
+        arrival, later = nav.live_grid, object()
+        ex._arrival_grid = arrival
+        here = (s.pose.x, s.pose.y)
+        report = FrontierReport([], None, 0, 1.0, unobservable=[here])
+        ex._decide(report, arrival, s.pose, s.clock.now())
+        assert ex.explorer.blacklist == []
+        ex._decide(report, later, s.pose, s.clock.now())
+        assert ex.explorer.blacklist == [here]
     finally:
         s.close()
 
