@@ -11,9 +11,9 @@ frontier:
 (``explore_lite`` names and defaults: potential_scale 3, gain_scale 1, lengths in metres). The
 goal sent for a frontier is its reachable cell nearest to the robot by travel, or, when every
 frontier cell lies too close to a wall for the robot's footprint, the nearest reachable cell within
-``goal_reach`` of the frontier. Cells within ``blacklist_radius`` of a goal that failed, or within
-``min_goal_distance`` of the robot, are not goals (``explore_lite``'s blacklist, per cell): a frontier
-is skipped only when no other cell can be its goal.
+``goal_reach`` of the frontier. Cells within ``blacklist_radius`` of a goal that failed are not
+goals (``explore_lite``'s blacklist, per cell): a frontier is skipped only when no other cell can be
+its goal.
 
 Pure numpy/scipy over whole grids: no per-cell Python loop; the one loop is over frontiers (tens).
 """
@@ -109,8 +109,7 @@ class FrontierReport:
     blacklisted: int = 0
     """Reachable frontiers skipped because every cell that could be their goal is near a failed one."""
     unobservable: list[tuple[float, float]] = field(default_factory=list)
-    """Goals of reachable frontiers skipped because the robot stands at them already (and every
-    other cell that could be their goal is blacklisted or as close)."""
+    """Goals of better-ranked frontiers skipped because the robot stands at them already."""
     travel: np.ndarray | None = None
     """The distance field (m) the frontiers were scored with; None when the map had no frontier."""
     geometry: GridGeometry | None = None
@@ -236,7 +235,6 @@ class FrontierExplorer:
             return FrontierReport([], None, 0, free_area)
         dist = distance_field(costmap, robot, o.cost_travel_multiplier)
         banned = disk_mask(geo, self.banned_places, o.blacklist_radius)
-        here = disk_mask(geo, [(robot.x, robot.y)], o.min_goal_distance)
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         keep = np.nonzero(sizes * res >= o.min_frontier_size)[0] + 1
         reach_cells = max(1, math.ceil(o.goal_reach / res))
@@ -261,17 +259,11 @@ class FrontierExplorer:
             region = own
             if _first_reachable(d_win, (own,)) is None:
                 region = ndimage.distance_transform_edt(~own) <= reach_cells
-            # The goal: a candidate not near a failed goal nor where the robot stands (it would see
-            # the frontier from there if it could); low-cost cells first.
-            allowed = region & ~(banned[r0:r1, c0:c1] | here[r0:r1, c0:c1])
+            # The goal: a candidate not near a failed goal; low-cost cells first.
+            allowed = region & ~banned[r0:r1, c0:c1]
             on = _first_reachable(d_win, (allowed & low, allowed))
-            if on is None:
-                anywhere = _first_reachable(d_win, (region,))
-                if anywhere is not None:  # reachable, but every candidate banned or at the robot
-                    if banned[r0:r1, c0:c1].ravel()[int(np.argmin(anywhere))]:
-                        skipped += 1
-                    else:
-                        unobservable.append(_argmin_world(geo, anywhere, r0, c0))
+            if on is None and _first_reachable(d_win, (region,)) is not None:
+                skipped += 1  # reachable, but every candidate is near a failed goal
             goal, travel = None, math.inf
             if on is not None:
                 i = int(np.argmin(on))
@@ -282,7 +274,15 @@ class FrontierExplorer:
             cx, cy = cells.mean(axis=0)
             frontiers.append(Frontier(cells, length, (float(cx), float(cy)), goal, travel, cost))
         frontiers.sort(key=lambda f: f.cost)
-        chosen = frontiers[0] if frontiers and frontiers[0].goal is not None else None
+        chosen = None
+        for f in frontiers:
+            if f.goal is None:
+                break  # sorted: the rest are unreachable too
+            if math.hypot(f.goal[0] - robot.x, f.goal[1] - robot.y) < o.min_goal_distance:
+                unobservable.append(f.goal)  # the robot stands there and does not see past it
+                continue
+            chosen = f
+            break
         return FrontierReport(
             frontiers,
             chosen,

@@ -198,6 +198,8 @@ class Exploration:
         grid, costmap = self.navigation.live_grid, self.navigation.global_costmap
         if grid is None or costmap is None:
             return
+        if grid is self._arrival_grid:
+            return  # a goal was reached on this map: wait for one with what the robot sees there
         fresh = grid is not self._evaluated_grid
         due = now - self._last_eval >= self.options.replan_interval
         if not ((fresh and due) or (self._need_eval and self._request is None)):
