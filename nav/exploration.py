@@ -11,8 +11,9 @@ frontier:
 (``explore_lite`` names and defaults: potential_scale 3, gain_scale 1, lengths in metres). The
 goal sent for a frontier is its reachable cell nearest to the robot by travel, or, when every
 frontier cell lies too close to a wall for the robot's footprint, the nearest reachable cell within
-``goal_reach`` of the frontier. Frontiers whose goal lies within ``blacklist_radius`` of a goal that
-failed are skipped (``explore_lite``'s blacklist).
+``goal_reach`` of the frontier. Cells within ``blacklist_radius`` of a goal that failed are not
+goals (``explore_lite``'s blacklist, per cell): a frontier is skipped only when no other cell can be
+its goal.
 
 Pure numpy/scipy over whole grids: no per-cell Python loop; the one loop is over frontiers (tens).
 """
@@ -26,7 +27,7 @@ import numpy as np
 from scipy import ndimage
 
 from nav.planning.grid_search import SearchState
-from nav.types import INSCRIBED_INFLATED_OBSTACLE, Costmap, OccupancyGrid, Pose2D
+from nav.types import INSCRIBED_INFLATED_OBSTACLE, Costmap, GridGeometry, OccupancyGrid, Pose2D
 
 EIGHT = np.ones((3, 3), dtype=bool)
 
@@ -53,6 +54,12 @@ class FrontierOptions:
     the robot goes to the nearest traversable cell within this distance (m), from where its lidar
     sees past the frontier."""
     blacklist_radius: float = 0.5
+    """Frontier cells within this distance (m) of a failed goal are not goals again; the rest of a
+    long frontier (a room's open side) still is."""
+    max_attempts: int = 2
+    """Goals tried at one place (within ``blacklist_radius``) before it is given up for good: once no
+    other frontier is left, places that failed fewer times are forgiven (``forgive``) and tried
+    again from where the robot now is, on the map as it has grown since."""
     min_goal_distance: float = 0.5
     """A frontier whose goal is this close to the robot stays unseen from where the robot stands
     (under furniture, in a sensor shadow): it is not chosen, and ``FrontierReport.unobservable``
@@ -64,7 +71,6 @@ class FrontierOptions:
     """Goal cells are taken among those with a cost up to this when the frontier has any (away from
     the steep part of the inflation, where a controller may fail to settle), else among all
     traversable ones."""
-    """A frontier whose goal is within this distance (m) of a failed goal is not chosen again."""
     cost_travel_multiplier: float = 2.0
     """Step cost weighting of the distance field, as the planner's (keeps travel costs comparable
     with the paths the planner will return)."""
@@ -101,13 +107,25 @@ class FrontierReport:
     free_area_m2: float
     """Known-free area of the map (m^2): what has been explored."""
     blacklisted: int = 0
-    """Better-ranked reachable frontiers skipped because their goal is near a failed one."""
+    """Reachable frontiers skipped because every cell that could be their goal is near a failed one."""
     unobservable: list[tuple[float, float]] = field(default_factory=list)
     """Goals of better-ranked frontiers skipped because the robot stands at them already."""
+    travel: np.ndarray | None = None
+    """The distance field (m) the frontiers were scored with; None when the map had no frontier."""
+    geometry: GridGeometry | None = None
 
     @property
     def reachable(self) -> list[Frontier]:
         return [f for f in self.frontiers if f.reachable]
+
+    def travel_to(self, xy: tuple[float, float]) -> float:
+        """Travel (m) from the robot to ``xy`` along the distance field (inf if unreachable)."""
+        if self.travel is None or self.geometry is None:
+            return math.inf
+        rows, cols = self.geometry.world_to_cell(np.array([xy]))
+        if not self.geometry.in_bounds(rows, cols)[0]:
+            return math.inf
+        return float(self.travel[rows[0], cols[0]])
 
 
 def frontier_mask(grid: OccupancyGrid, free_threshold: int = 64) -> np.ndarray:
@@ -151,24 +169,53 @@ def distance_field(costmap: Costmap, start: Pose2D, cost_travel_multiplier: floa
 
 @dataclass
 class FrontierExplorer:
-    """Finds and ranks frontiers; remembers failed goals (the blacklist)."""
+    """Finds and ranks frontiers; remembers failed goals (the blacklist).
+
+    The blacklist bans *cells*, not frontiers: cells within ``blacklist_radius`` of a failed goal are
+    not goals again, and a frontier keeps its other cells (explore_lite drops the whole frontier,
+    which in a generated office lost whole rooms to one doorway goal that failed)."""
 
     options: FrontierOptions = field(default_factory=FrontierOptions)
     blacklist: list[tuple[float, float]] = field(default_factory=list)
+    attempts: list[int] = field(default_factory=list)
+    """Failures at each blacklist place (parallel to ``blacklist``)."""
+    forgiven: list[bool] = field(default_factory=list)
+    """Places forgiven by ``forgive`` (their cells are goals again until they fail once more)."""
 
     def mark_failed(self, goal: tuple[float, float]) -> None:
-        """Never choose a frontier whose goal is near ``goal`` again (it could not be reached)."""
-        self.blacklist.append((float(goal[0]), float(goal[1])))
+        """Ban the cells near ``goal`` as goals (it could not be reached or seen past). A failure near
+        a known place counts as another attempt there."""
+        xy = (float(goal[0]), float(goal[1]))
+        if self.blacklist:
+            b = np.asarray(self.blacklist)
+            d = np.hypot(b[:, 0] - xy[0], b[:, 1] - xy[1])
+            i = int(np.argmin(d))
+            if d[i] <= self.options.blacklist_radius:
+                self.attempts[i] += 1
+                self.forgiven[i] = False
+                return
+        self.blacklist.append(xy)
+        self.attempts.append(1)
+        self.forgiven.append(False)
+
+    def forgive(self) -> int:
+        """Lift the ban on places that failed fewer than ``max_attempts`` times (a goal can fail for
+        the way the robot came or a map that has grown since); returns how many were lifted."""
+        n = 0
+        for i, tries in enumerate(self.attempts):
+            if not self.forgiven[i] and tries < self.options.max_attempts:
+                self.forgiven[i] = True
+                n += 1
+        return n
 
     def clear_blacklist(self) -> None:
         self.blacklist.clear()
+        self.attempts.clear()
+        self.forgiven.clear()
 
-    def _blacklisted(self, goal: tuple[float, float]) -> bool:
-        if not self.blacklist:
-            return False
-        b = np.asarray(self.blacklist)
-        d = np.hypot(b[:, 0] - goal[0], b[:, 1] - goal[1])
-        return bool((d <= self.options.blacklist_radius).any())
+    @property
+    def banned_places(self) -> list[tuple[float, float]]:
+        return [xy for xy, f in zip(self.blacklist, self.forgiven, strict=True) if not f]
 
     def find(self, grid: OccupancyGrid, costmap: Costmap, robot: Pose2D) -> FrontierReport:
         """Frontiers of ``grid`` ranked for a robot at ``robot``; ``costmap`` must share the grid's
@@ -187,11 +234,13 @@ class FrontierExplorer:
         if n == 0:
             return FrontierReport([], None, 0, free_area)
         dist = distance_field(costmap, robot, o.cost_travel_multiplier)
+        banned = disk_mask(geo, self.banned_places, o.blacklist_radius)
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         keep = np.nonzero(sizes * res >= o.min_frontier_size)[0] + 1
         reach_cells = max(1, math.ceil(o.goal_reach / res))
         objects = ndimage.find_objects(labels)
         frontiers: list[Frontier] = []
+        skipped, unobservable = 0, []
         for lab in keep:
             sl = objects[lab - 1]
             assert sl is not None
@@ -203,39 +252,73 @@ class FrontierExplorer:
             cells = geo.cell_to_world(rows + r0, cols + c0)
             d_win = dist[r0:r1, c0:c1]
             low = costmap.costs[r0:r1, c0:c1] <= o.goal_max_cost
-            # the frontier's own cells, else cells within reach; low-cost cells first in each
-            on = _first_reachable(d_win, (own & low, own))
-            if on is None:
-                # Only now the disk around the frontier (a Euclidean distance transform of the
-                # window: a dilation by a 25 x 25 disk for every frontier took a fifth of the CPU
-                # of exploring the office).
-                near = ndimage.distance_transform_edt(~own) <= reach_cells
-                on = _first_reachable(d_win, (near & low, near))
+            # Candidates: the frontier's own reachable cells, else (all too close to walls for the
+            # footprint) the reachable cells within reach of it. Only now the disk around it (a
+            # Euclidean distance transform of the window: a dilation by a 25 x 25 disk for every
+            # frontier took a fifth of the CPU of exploring the office).
+            region = own
+            if _first_reachable(d_win, (own,)) is None:
+                region = ndimage.distance_transform_edt(~own) <= reach_cells
+            # The goal: a candidate not near a failed goal; low-cost cells first.
+            allowed = region & ~banned[r0:r1, c0:c1]
+            on = _first_reachable(d_win, (allowed & low, allowed))
+            if on is None and _first_reachable(d_win, (region,)) is not None:
+                skipped += 1  # reachable, but every candidate is near a failed goal
             goal, travel = None, math.inf
             if on is not None:
                 i = int(np.argmin(on))
-                gr, gc = divmod(i, on.shape[1])
-                travel = float(on[gr, gc])
-                gxy = geo.cell_to_world(np.array([gr + r0]), np.array([gc + c0]))[0]
-                goal = (float(gxy[0]), float(gxy[1]))
+                travel = float(on.ravel()[i])
+                goal = _argmin_world(geo, on, r0, c0)
             length = float(rows.size) * res
             cost = o.potential_scale * travel - o.gain_scale * length if goal is not None else math.inf
             cx, cy = cells.mean(axis=0)
             frontiers.append(Frontier(cells, length, (float(cx), float(cy)), goal, travel, cost))
         frontiers.sort(key=lambda f: f.cost)
-        chosen, skipped, here = None, 0, []
+        chosen = None
         for f in frontiers:
             if f.goal is None:
                 break  # sorted: the rest are unreachable too
-            if self._blacklisted(f.goal):
-                skipped += 1
-                continue
             if math.hypot(f.goal[0] - robot.x, f.goal[1] - robot.y) < o.min_goal_distance:
-                here.append(f.goal)
+                unobservable.append(f.goal)  # the robot stands there and does not see past it
                 continue
             chosen = f
             break
-        return FrontierReport(frontiers, chosen, int(np.count_nonzero(mask)), free_area, skipped, here)
+        return FrontierReport(
+            frontiers,
+            chosen,
+            int(np.count_nonzero(mask)),
+            free_area,
+            skipped,
+            unobservable,
+            dist,
+            geo,
+        )
+
+
+def disk_mask(geo: GridGeometry, points: list[tuple[float, float]], radius: float) -> np.ndarray:
+    """(H, W) bool: cells whose centre is within ``radius`` of any of ``points`` (one small window
+    per point: tens of points)."""
+    out = np.zeros((geo.height, geo.width), dtype=bool)
+    if not points:
+        return out
+    k = math.ceil(radius / geo.resolution) + 1
+    rows, cols = geo.world_to_cell(np.asarray(points, dtype=float))
+    for (px, py), r, c in zip(points, rows, cols, strict=True):
+        r0, r1 = max(int(r) - k, 0), min(int(r) + k + 1, geo.height)
+        c0, c1 = max(int(c) - k, 0), min(int(c) + k + 1, geo.width)
+        if r0 >= r1 or c0 >= c1:
+            continue
+        rr, cc = np.mgrid[r0:r1, c0:c1]
+        xy = geo.cell_to_world(rr.ravel(), cc.ravel())
+        near = np.hypot(xy[:, 0] - px, xy[:, 1] - py) <= radius
+        out[r0:r1, c0:c1] |= near.reshape(r1 - r0, c1 - c0)
+    return out
+
+
+def _argmin_world(geo: GridGeometry, on: np.ndarray, r0: int, c0: int) -> tuple[float, float]:
+    gr, gc = divmod(int(np.argmin(on)), on.shape[1])
+    gxy = geo.cell_to_world(np.array([gr + r0]), np.array([gc + c0]))[0]
+    return (float(gxy[0]), float(gxy[1]))
 
 
 def _first_reachable(dist: np.ndarray, regions: tuple[np.ndarray, ...]) -> np.ndarray | None:

@@ -9,10 +9,11 @@ import numpy as np
 import pytest
 
 from app.commands.explore import build_explore_stack, load_world
-from app.features.exploration import ENDED, ExplorationRefused, ExplorationState
+from app.features.exploration import ENDED, ExplorationOptions, ExplorationRefused, ExplorationState
 from app.features.navigation import NavigationRefused
 from app.modes import Mode
 from bench.explore import compare
+from nav.exploration import FrontierReport
 from nav.types import LETHAL_OBSTACLE, OccupancyGrid, Pose2D, Twist2D
 from robot.base import SensorFrame
 
@@ -249,6 +250,54 @@ def test_a_failed_frontier_goal_is_blacklisted_and_another_chosen():
         assert _run_until(stack, lambda: ex._goal is not None, 10.0)
         assert math.dist(ex._goal, failed) > ex.options.frontiers.blacklist_radius
         assert ex.state == ExplorationState.EXPLORING
+    finally:
+        s.close()
+
+
+def test_a_goal_the_robot_comes_no_closer_to_is_given_up_after_the_progress_timeout():
+    # office:1: 310 s on a goal 1.9 m away by the distance field while the robot drove 14 m off
+    # and back, the navigator content all along; explore_lite gives such a goal up
+    stack = _stack()
+    s, ex, nav = stack.session, stack.exploration, stack.navigation
+    ex.options = ExplorationOptions(progress_timeout=4.0)
+    try:
+        ex.start()
+        assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
+        goal = ex._goal
+
+        def hold() -> bool:  # the navigator keeps the goal but the robot gets no closer
+            if nav.active and nav.navigator.state.value != "stuck":
+                nav.navigator.halt("NoValidControl", "test: held")
+            return ex.goals_failed >= 1
+
+        assert _run_until(stack, hold, 20.0)  # before the recoveries' 6 retries are spent
+        ev = [e for e in s.events if e["type"] == "exploration" and e["status"] == "frontier blacklisted"]
+        assert ev[0]["goal"] == list(goal) and ev[0]["reason"] == "no progress towards the frontier"
+        s.run_for(0.5)  # the navigator ends the cancelled request on its next tick
+        # the explorer cancelled it: the navigator had not given it up itself
+        ends = [e for e in s.events if e["type"] == "navigation" and "outcome" in e]
+        assert ends[0]["outcome"] == "cancelled" and ends[0]["actor"] == "explorer", ends[0]
+        assert ex.explorer.banned_places == [goal] and ex.state == ExplorationState.EXPLORING
+    finally:
+        s.close()
+
+
+def test_a_frontier_is_judged_unobservable_only_on_a_map_published_after_arrival():
+    # office:1: a goal counted reached at 0.5 m was blacklisted as unobservable in the same tick,
+    # on the map of the arrival tick, before SLAM had put in what the lidar saw from there
+    stack = _stack()
+    s, ex, nav = stack.session, stack.exploration, stack.navigation
+    try:
+        ex.start()
+        assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
+        arrival, later = nav.live_grid, object()
+        ex._arrival_grid = arrival
+        here = (s.pose.x, s.pose.y)
+        report = FrontierReport([], None, 0, 1.0, unobservable=[here])
+        ex._decide(report, arrival, s.pose, s.clock.now())
+        assert ex.explorer.blacklist == []
+        ex._decide(report, later, s.pose, s.clock.now())
+        assert ex.explorer.blacklist == [here]
     finally:
         s.close()
 

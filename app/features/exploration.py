@@ -36,6 +36,7 @@ if TYPE_CHECKING:
     from app.session import Session
     from robot.base import SensorFrame
 
+PROGRESS_STEP = 0.1  # m closer along the distance field that counts as progress (two cells)
 ORDER = 45  # after navigation: a goal sent here is picked up by its next tick
 log = logging.getLogger("navdeck.exploration")
 
@@ -74,6 +75,11 @@ class ExplorationOptions:
     replan_interval: float = 1.0
     """Seconds between re-evaluations of the frontiers while driving to one (``explore_lite``
     ``planner_frequency`` 0.33 Hz; the map is published at 1 Hz here)."""
+    progress_timeout: float = 30.0
+    """A goal the robot has not come closer to for this long (s) is given up and blacklisted
+    (``explore_lite`` ``progress_timeout``, 30 s). Closer is measured along the frontier search's
+    distance field, so a long way round that follows it is progress and driving off elsewhere is
+    not (office:1: 310 s spent on a goal 1.9 m away while the robot drove 14 m off and back)."""
     max_frontier_points: int = 4000
     """Frontier cells sent to the 3D view, at most (a decimated sample of a large map's)."""
     stop_mapping_at_end: bool = True
@@ -103,6 +109,9 @@ class Exploration:
         self._ended: float | None = None
         self._request: int | None = None  # the navigation request of the current goal
         self._goal: tuple[float, float] | None = None
+        self._best_travel = math.inf  # the least field travel to the goal seen so far, and when
+        self._progress_at = 0.0
+        self._arrival_grid: Any = None  # the map when a goal was reached: too old to judge it by
         self._last_eval = -math.inf
         self._evaluated_grid: Any = None
         self._need_eval = False  # a goal ended (or exploring began): evaluate without waiting
@@ -189,6 +198,8 @@ class Exploration:
         grid, costmap = self.navigation.live_grid, self.navigation.global_costmap
         if grid is None or costmap is None:
             return
+        if grid is self._arrival_grid:
+            return  # a goal was reached on this map: wait for one with what the robot sees there
         fresh = grid is not self._evaluated_grid
         due = now - self._last_eval >= self.options.replan_interval
         if not ((fresh and due) or (self._need_eval and self._request is None)):
@@ -264,20 +275,34 @@ class Exploration:
             return
         self.goals_reached += 1
         self.session.add_event("exploration", status="frontier reached", goal=list(goal))
+        self._arrival_grid = self.navigation.live_grid
         self._cancel_goal()
         self._need_eval = True
 
     def _decide(self, report: FrontierReport, grid: Any, pose: Pose2D, now: float) -> None:
         """Act on a frontier search: keep the goal, send the best frontier's, or end (loop thread)."""
         self._report = report
-        for goal in report.unobservable:  # the robot stands there and still does not see past it
-            self.explorer.mark_failed(goal)
-            self.session.add_event("exploration", status="frontier unobservable", goal=list(goal))
+        # The robot stands there and still does not see past it -- judged on a map SLAM published
+        # after it arrived (the one of the arrival tick does not hold what it sees from there yet).
+        if grid is not self._arrival_grid:
+            for goal in report.unobservable:
+                self.explorer.mark_failed(goal)
+                self.session.add_event("exploration", status="frontier unobservable", goal=list(goal))
         self._frontier_points = self._sample(report)
         if self._request is not None and self._goal is not None and self._goal_still_frontier(report):
-            return  # keep driving to it
+            if self._making_progress(report.travel_to(self._goal), now):
+                return  # keep driving to it
+            self._give_up_goal("no progress towards the frontier")
+            self._need_eval = True  # the next tick searches without the banned cells
+            return
         chosen = report.chosen
         if chosen is None:
+            if self._request is None and report.free_area_m2 > 0 and self.explorer.forgive():
+                # Before ending, places that failed once are tried again from here, on the map as
+                # it is now (a goal fails for the way the robot came, a doorway seen edge-on...).
+                self.session.add_event("exploration", status="blacklist forgiven")
+                self._need_eval = True
+                return
             if self._request is None and report.free_area_m2 > 0:  # not before SLAM saw anything
                 left = len(report.frontiers)
                 why = (
@@ -300,6 +325,7 @@ class Exploration:
             )
             return
         self._request, self._goal = rid, chosen.goal
+        self._best_travel, self._progress_at = chosen.travel, now
         self.goals_sent += 1
         self.session.add_event(
             "exploration",
@@ -309,6 +335,21 @@ class Exploration:
             travel_m=round(chosen.travel, 2),
             frontiers=len(report.frontiers),
         )
+
+    def _making_progress(self, travel: float, now: float) -> bool:
+        """Has the robot come closer to the goal (along the distance field) within
+        ``progress_timeout``? Every call with a shorter travel counts as progress."""
+        if travel < self._best_travel - PROGRESS_STEP:
+            self._best_travel, self._progress_at = travel, now
+        return now - self._progress_at <= self.options.progress_timeout
+
+    def _give_up_goal(self, reason: str) -> None:
+        assert self._goal is not None
+        goal = self._goal
+        self._cancel_goal()
+        self.explorer.mark_failed(goal)
+        self.goals_failed += 1
+        self.session.add_event("exploration", status="frontier blacklisted", goal=list(goal), reason=reason)
 
     def _goal_still_frontier(self, report: FrontierReport) -> bool:
         """Does a reachable, not blacklisted frontier still lie at the current goal?"""
