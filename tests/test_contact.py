@@ -437,6 +437,33 @@ def test_teb_waits_for_a_walker_coming_head_on() -> None:
         assert cmd.vx < v.vx and debug.velocities[0, 0] < 0.1
 
 
+def test_teb_waits_or_backs_off_for_a_walker_without_spending_its_patience() -> None:
+    """A walker 0.75 m ahead coming at the robot (0.3 m/s), for 1 s of 10 Hz cycles: every cycle
+    TEB stands or backs away, never drives at the walker, and says so with a command: it used to
+    refuse every band that kept less than its walker clearance, backing away included, so after
+    0.3 s (failure_tolerance) it raised PatienceExceeded and the navigator started a recovery
+    (apartment 16, world 361274677: six recoveries, then the goal failed)."""
+    pose, v = Pose2D(0.5, 1.5, 0.0), Twist2D(0.0, 0.0, 0.0)
+    teb, costmap = corridor_teb()
+    teb.set_walkers(np.array([[1.25, 1.5]]), np.array([[-0.3, 0.0]]))
+    for _ in range(10):
+        cmd, _ = teb.compute(pose, v, costmap)
+        assert cmd.vx <= 0.0
+
+
+def test_teb_drives_away_from_a_walker_standing_beside_it() -> None:
+    """A walker standing 0.5 m behind the robot (inside the band's walker clearance, as the
+    simulator's walkers stop next to a robot): driving on along the path only takes the robot
+    farther from it, so TEB drives instead of waiting for a walker that waits for it."""
+    pose, v = Pose2D(0.5, 1.5, 0.0), Twist2D(0.1, 0.0, 0.0)
+    teb, costmap = corridor_teb()
+    teb.set_walkers(np.array([[0.0, 1.5]]), np.zeros((1, 2)))
+    assert teb._radius + PERSON_RADIUS > 0.5  # the walker is within the clearance the band keeps
+    cmd, debug = teb.compute(pose, v, costmap)
+    assert debug.waiting_for == ""
+    assert cmd.vx > v.vx
+
+
 def test_teb_band_keeps_clear_of_a_walkers_predicted_positions() -> None:
     """A walker crossing the corridor ahead (1 m/s along +y) passes the path where the band
     would be ~1 s later: the optimized band keeps the footprint's circle off the walker's body at

@@ -14,7 +14,7 @@ from nav.control import ControllerError, InvalidPath, NoValidControl
 from nav.control.errors import PatienceExceeded
 from nav.control.teb import DistanceField, TebController, TebDebug, band_fold
 from nav.control.teb_options import FORWARD_DRIVE_WEIGHT, TebConfigError, TebOptions
-from nav.types import Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
+from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, Path, Pose2D, Twist2D, wrap_angle
 from robot.profiles import load_profile
 
 SKID_INSCRIBED = 0.10
@@ -342,3 +342,23 @@ def test_reversing_skid_base_gets_teb_forward_drive_weight_omni_does_not() -> No
     # an explicit override still wins
     opts = TebOptions.for_robot(load_profile("skid4"), weight_kinematics_forward_drive=1.0)
     assert opts.weight_kinematics_forward_drive == 1.0
+
+
+def test_band_seed_never_jumps_over_an_obstacle() -> None:
+    """Two posts flank the path 0.5 m apart (0.18 m left, 0.32 m right: closer together than the
+    band's clearance from both). Seeding the band, a pose beside the left post is moved only where
+    it can go without nearing the post: the band stays between the posts. It used to be pushed on
+    through the post to its far side (y 0.525), so the band zigzagged round the post and every
+    cycle's band collided (a table's legs in apartment 8, world 679961800)."""
+    left, right = (1.5, 0.18, 0.03), (1.5, -0.32, 0.03)
+    cm = corridor(left)
+    rows, cols = np.indices(cm.costs.shape)
+    xy = cm.geometry.cell_to_world(rows.ravel(), cols.ravel())
+    post = np.hypot(xy[:, 0] - right[0], xy[:, 1] - right[1]) <= right[2]
+    cm.costs[post.reshape(cm.costs.shape)] = LETHAL_OBSTACLE
+    ctl = TebController(DIFF)
+    ctl.set_path(straight_path(3.0, 61))
+    cmd, dbg = ctl.compute(Pose2D(1.0, 0.0, 0.0), Twist2D(0.2, 0.0, 0.0), cm)
+    assert dbg.band[:, 1].max() < left[1] - left[2]
+    assert dbg.band[:, 1].min() > right[1] + right[2]
+    assert cmd.vx > 0.0

@@ -35,7 +35,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy import ndimage
@@ -130,6 +130,7 @@ class TebDebug:
     solve_time: float = 0.0  # wall time of the optimization, s
     min_clearance: float = math.inf  # smallest centre-to-obstacle distance along the band, m
     reference: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))  # local global path
+    waiting_for: str = ""  # why the command is a stop this cycle (a walker in the band's way)
 
     @property
     def velocities(self) -> np.ndarray:
@@ -244,6 +245,12 @@ def _resample(xy: np.ndarray, theta: np.ndarray, t: np.ndarray, n: int) -> tuple
     q = np.linspace(0.0, s[-1], n)
     poses = np.column_stack((np.interp(q, s, xy[:, 0]), np.interp(q, s, xy[:, 1]), np.interp(q, s, theta)))
     return poses, np.interp(q, s, t)
+
+
+def _reachable(clear: np.ndarray, floor: np.ndarray) -> np.ndarray:
+    """(P, K) bool: which of the K offsets of each of P poses (clearances ``clear``, sampled
+    outwards) are reached without the clearance dropping below the pose's ``floor`` on the way."""
+    return np.minimum.accumulate(clear, axis=1) >= floor[:, None]
 
 
 class TebController:
@@ -446,26 +453,39 @@ class TebController:
         (along the band's normal) to the nearest offset with that clearance, every run of such poses
         to the same side, the side with the smaller detour (left on a tie). In place. Pushing the
         near-miss poses too, not only colliding ones, starts the optimizer out of the obstacle
-        penalty's steep part."""
+        penalty's steep part.
+
+        A pose only moves away from what it is near, never through it: an offset counts only if
+        the clearance on the way there never drops below the pose's own (:func:`_reachable`).
+        Searching past that let a pose beside a table leg land on the leg's far side, so the band
+        zigzagged round the leg and every cycle's band collided (apartment 8, world 679961800).
+        When neither side reaches the clearance for the whole run (a pose between two legs closer
+        than the band's clearance), each pose of it moves to the clearest point it can reach."""
         o = self.options
         need = self._radius + o.min_obstacle_dist
         inner = poses[1:-1, :2]
         if len(inner) == 0:
             return
-        blocked = dfield(inner) < need
+        here = dfield(inner)
+        blocked = here < need
         if not blocked.any():
             return
         tangent = np.gradient(poses[:, :2], axis=0)[1:-1]
         tangent /= np.maximum(np.hypot(*tangent.T), 1e-9)[:, None]
         normal = np.column_stack((-tangent[:, 1], tangent[:, 0]))
         offsets = np.arange(1, 51) * 0.02  # up to 1 m
+        slack = 0.25 * dfield.geometry.resolution  # the bilinear field's ripple
         idx = np.flatnonzero(blocked)
         runs = np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1)
         for run in runs:
             best = None
+            reach: list[tuple[float, np.ndarray]] = []
             for side in (1.0, -1.0):
                 cand = inner[run, None, :] + side * offsets[None, :, None] * normal[run, None, :]
-                ok = (dfield(cand.reshape(-1, 2)) >= need).reshape(len(run), len(offsets))
+                clear = dfield(cand.reshape(-1, 2)).reshape(len(run), len(offsets))
+                clear = np.where(_reachable(clear, here[run] - slack), clear, -np.inf)
+                reach.append((side, clear))
+                ok = clear >= need
                 if not ok.any(axis=1).all():
                     continue
                 first = offsets[np.argmax(ok, axis=1)]
@@ -473,7 +493,12 @@ class TebController:
                     best = (side, first)
             if best is not None:
                 side, first = best
-                poses[1:-1][run, :2] = inner[run] + side * first[:, None] * normal[run]
+                shift = side * first
+            else:  # no side clears the whole run: each pose to the clearest point it can reach
+                clear = np.hstack([here[run, None]] + [c for _, c in reach])
+                signed = np.concatenate(([0.0], *(side * offsets for side, _ in reach)))
+                shift = signed[np.argmax(clear, axis=1)]
+            poses[1:-1][run, :2] = inner[run] + shift[:, None] * normal[run]
         if not self.options.holonomic:
             chord = np.arctan2(*np.diff(poses[:, 1::-1], axis=0).T)
             poses[1:-1, 2] = poses[1:-1, 2] + wrap_angle(chord[1:] - poses[1:-1, 2])
@@ -586,9 +611,16 @@ class TebController:
                 return self._fail(f"band pose {hit} collides", poses, dts, local, warm, debug)
             meet = self._walker_conflict(poses[: k + 1], dts[:k])
             if meet >= 0:
-                # the band would meet a walker: wait (stop this cycle; re-seeded next cycle)
+                # The band would meet a walker: stand and let it pass (re-seeded next cycle). A
+                # wait is a command, not a failure: counted as one, a walker crossing for 0.3 s
+                # spent the controller's patience and started a recovery (apartment 16, world
+                # 361274677: six of them, then the goal failed). A wait that lasts is the
+                # navigator's to end (its stall and progress checks).
                 self._band = self._dts = None
-                return self._fail(f"band pose {meet} meets a walker", poses, dts, local, warm, debug)
+                self._fail_cycles = 0
+                debug = replace(debug, waiting_for=f"band pose {meet} meets a walker")
+                self.last_debug = debug
+                return Twist2D(), debug
         self._fail_cycles = 0
         vx, vy, wz = (float(v) for v in debug.velocities[0])
         if not o.holonomic:
@@ -621,12 +653,17 @@ class TebController:
 
     def _walker_conflict(self, poses: np.ndarray, dts: np.ndarray) -> int:
         """Index (1-based, into ``poses``) of the first pose whose circumscribed circle takes in a
-        walker's predicted body at that pose's time, or -1."""
+        walker's predicted body at that pose's time nearer than standing at ``poses[0]`` would, or
+        -1. Only moving towards a walker counts: a walker already beside the robot (the
+        simulator's and many people's way is to wait for it) does not pin a robot that drives
+        away from it, as DWA's escape rule lets a footprint on a wall turn or back away."""
         if not (self.options.include_dynamic_obstacles and len(self._walkers) and len(dts)):
             return -1
         at = self._predict_walkers(np.cumsum(dts))  # (k, W, 2)
-        gap = np.hypot(*(at - poses[1:, None, :2]).transpose(2, 0, 1)).min(axis=1)
-        bad = np.flatnonzero(gap < self._radius + PERSON_RADIUS)
+        gap = np.hypot(*(at - poses[1:, None, :2]).transpose(2, 0, 1))  # (k, W)
+        stand = np.hypot(*(at - poses[0, None, None, :2]).transpose(2, 0, 1))
+        closer = (gap < self._radius + PERSON_RADIUS) & (gap < stand - 1e-3)
+        bad = np.flatnonzero(closer.any(axis=1))
         return int(bad[0]) + 1 if bad.size else -1
 
     def _swept_collisions(self, costmap: Costmap, poses: np.ndarray) -> int:
