@@ -218,6 +218,17 @@ def test_one_trial_per_family_end_to_end(family: str) -> None:
     assert moving.value == 0 and moving.ok is True
 
 
+@pytest.mark.parametrize("trial", [8, 16])
+def test_teb_reaches_apartment_goals_it_used_to_give_up(trial: int) -> None:
+    """Two apartment trials TEB gave up on (PatienceExceeded after six recoveries, no contact):
+    trial 8 (world 679961800), where the band's seed jumped a table leg so every band collided,
+    and trial 16 (world 361274677), where each walker in the band's way spent the controller's
+    patience. TEB now reaches both goals without touching anything while moving."""
+    t = run_trial("apartment", trial, seed=0, controller="teb")
+    assert t.outcome == "reached", t.outcome
+    assert t.contacts.while_moving == 0
+
+
 def test_family_benchmarks_registered_per_controller(monkeypatch: pytest.MonkeyPatch) -> None:
     names = {b.name for b in family_bench.BENCHMARKS}
     assert names == {f"scenarios.family.{f}_{c}" for f in FAMILIES for c in ("dwa", "teb")}
