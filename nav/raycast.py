@@ -136,6 +136,16 @@ def _march(
         out[i] = march_ray(walk, n, stride, u0[i], v0[i], du[i], dv[i], t_max, t_start[i])
 
 
+def occupancy_mask(occupied: np.ndarray, geometry: GridGeometry) -> np.ndarray:
+    """``occupied`` as a bool array, checked to be (height, width) of ``geometry``."""
+    occupied = np.asarray(occupied, dtype=bool)
+    if occupied.shape != (geometry.height, geometry.width):
+        raise ValueError(
+            f"mask shape {occupied.shape} != grid (height, width) {(geometry.height, geometry.width)}"
+        )
+    return occupied
+
+
 class RayCaster:
     """Casts many rays on one static occupancy mask (the padded lookup table is built once).
 
@@ -153,11 +163,7 @@ class RayCaster:
         of its origin (nothing can be hit closer) and jumps across open space on the way (see
         ``march_ray``), which pays off for many casts on a static map; results are identical
         either way."""
-        occupied = np.asarray(occupied, dtype=bool)
-        if occupied.shape != (geometry.height, geometry.width):
-            raise ValueError(
-                f"mask shape {occupied.shape} != grid (height, width) {(geometry.height, geometry.width)}"
-            )
+        occupied = occupancy_mask(occupied, geometry)
         self.geometry = geometry
         h, w = occupied.shape
         # A square table with a free border: indices clipped to [0, n + 1] on both axes land on free

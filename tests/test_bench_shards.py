@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import time
 from pathlib import Path
 
 import pytest
@@ -45,3 +46,14 @@ def test_shards_of_one_commit_sum_into_one_set(tmp_path: Path) -> None:
 def test_no_log_path_writes_nothing(tmp_path: Path) -> None:
     TrialLog(None, "x").write(0, "reached", 1.0)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_cpu_lap_counts_this_process_since_the_last_lap(tmp_path):
+    log = TrialLog(str(tmp_path / "l.jsonl"), "x")
+    log.cpu_lap()
+    t_end = time.process_time() + 0.05
+    while time.process_time() < t_end:  # burn CPU: the lap measures process time, not wall time
+        pass
+    first = log.cpu_lap()
+    assert first >= 0.05
+    assert log.cpu_lap() < first

@@ -30,14 +30,20 @@ def _costmap(grid: OccupancyGrid) -> Costmap:
     return Costmap2D.from_map(grid, opts).costmap()
 
 
+def _walled_left_known(rows: int, cols: int = 130, known_to: int = 45) -> np.ndarray:
+    """A room ``rows`` x ``cols`` cells with 5-cell walls on three sides (the east end open),
+    known free up to column ``known_to``, unknown beyond."""
+    data = np.full((rows, cols), -1, dtype=np.int8)
+    data[0:5, :] = 100
+    data[rows - 5 : rows, :] = 100
+    data[:, 0:5] = 100
+    data[5 : rows - 5, 5:known_to] = 0
+    return data
+
+
 def _corridor() -> np.ndarray:
     """A 6 x 1 m corridor (walls around), its left 2 m known free, the rest unknown."""
-    data = np.full((30, 130), -1, dtype=np.int8)
-    data[0:5, :] = 100
-    data[25:30, :] = 100
-    data[:, 0:5] = 100
-    data[5:25, 5:45] = 0
-    return data
+    return _walled_left_known(30)
 
 
 def _walled(n: int = 12) -> np.ndarray:
@@ -223,12 +229,7 @@ def test_goals_keep_off_the_walls_when_the_frontier_allows():
 
 def _room_half_known() -> np.ndarray:
     """A 6 x 4 m room (walls around), its left 2 m known free: one 3.5 m frontier across it."""
-    data = np.full((90, 130), -1, dtype=np.int8)
-    data[0:5, :] = 100
-    data[85:90, :] = 100
-    data[:, 0:5] = 100
-    data[5:85, 5:45] = 0
-    return data
+    return _walled_left_known(90)
 
 
 def test_a_failed_goal_bans_its_cells_not_the_whole_frontier():

@@ -34,6 +34,14 @@ def _run_until(stack, pred, limit: float) -> bool:
     return False
 
 
+def _halt_navigation(stack, why: str) -> bool:
+    """Halt the navigator's controller (unless already stuck); True once a frontier goal failed."""
+    nav = stack.navigation
+    if nav.active and nav.navigator.state.value != "stuck":
+        nav.navigator.halt("NoValidControl", why)
+    return stack.exploration.goals_failed >= 1
+
+
 def _known_free_goal(stack, near: Pose2D, at_least: float) -> Pose2D:
     """A goal in the live costmap's free space at least ``at_least`` m from ``near`` (map frame)."""
     cm = stack.navigation.global_costmap
@@ -234,18 +242,14 @@ def test_stop_keeps_mapping_and_a_second_start_is_refused():
 
 def test_a_failed_frontier_goal_is_blacklisted_and_another_chosen():
     stack = _stack()
-    s, ex, nav = stack.session, stack.exploration, stack.navigation
+    s, ex = stack.session, stack.exploration
     try:
         ex.start()
         assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
         s.run_for(1.0)
 
-        def block() -> bool:  # the controller finds no way on (as if a door closed) until a goal fails
-            if nav.active and nav.navigator.state.value != "stuck":
-                nav.navigator.halt("NoValidControl", "test: blocked")
-            return ex.goals_failed >= 1
-
-        assert _run_until(stack, block, 60.0)
+        # the controller finds no way on (as if a door closed) until a goal fails
+        assert _run_until(stack, lambda: _halt_navigation(stack, "test: blocked"), 60.0)
         failed = ex.explorer.blacklist[-1]
         assert _run_until(stack, lambda: ex._goal is not None, 10.0)
         assert math.dist(ex._goal, failed) > ex.options.frontiers.blacklist_radius
@@ -258,19 +262,16 @@ def test_a_goal_the_robot_comes_no_closer_to_is_given_up_after_the_progress_time
     # office:1: 310 s on a goal 1.9 m away by the distance field while the robot drove 14 m off
     # and back, the navigator content all along; explore_lite gives such a goal up
     stack = _stack()
-    s, ex, nav = stack.session, stack.exploration, stack.navigation
+    s, ex = stack.session, stack.exploration
     ex.options = ExplorationOptions(progress_timeout=4.0)
     try:
         ex.start()
         assert _run_until(stack, lambda: ex.goals_sent > 0, 10.0)
         goal = ex._goal
 
-        def hold() -> bool:  # the navigator keeps the goal but the robot gets no closer
-            if nav.active and nav.navigator.state.value != "stuck":
-                nav.navigator.halt("NoValidControl", "test: held")
-            return ex.goals_failed >= 1
-
-        assert _run_until(stack, hold, 20.0)  # before the recoveries' 6 retries are spent
+        # the navigator keeps the goal but the robot gets no closer; a goal fails before the
+        # recoveries' 6 retries are spent
+        assert _run_until(stack, lambda: _halt_navigation(stack, "test: held"), 20.0)
         ev = [e for e in s.events if e["type"] == "exploration" and e["status"] == "frontier blacklisted"]
         assert ev[0]["goal"] == list(goal) and ev[0]["reason"] == "no progress towards the frontier"
         s.run_for(0.5)  # the navigator ends the cancelled request on its next tick

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from collections.abc import Callable
 
 from bench.core import Benchmark, Figure
@@ -93,12 +92,9 @@ def _bench(family: str, controller: str) -> Callable[[], list[Figure]]:
     def run() -> list[Figure]:
         log = TrialLog(os.environ.get(LOG_VAR), f"family {family} {controller}")
         first = first_trial(FIRST_VAR)
-        clock = [time.process_time()]
 
         def on_trial(trial: FamilyTrial) -> None:
-            now = time.process_time()
-            _log_line(log, trial, now - clock[0])
-            clock[0] = now
+            _log_line(log, trial, log.cpu_lap())
             _progress(trial)
 
         n = trial_count(TRIALS_VAR, 200)

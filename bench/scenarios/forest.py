@@ -239,14 +239,12 @@ def _progress(trial: ForestTrial) -> None:
 def _bench(prior_map: bool, controller: str) -> Callable[[], list[Figure]]:
     def run() -> list[Figure]:
         log = TrialLog(os.environ.get(LOG_VAR), f"forest {'prior' if prior_map else 'noprior'} {controller}")
-        clock = [time.process_time()]
 
         def on_trial(trial: ForestTrial) -> None:
-            now = time.process_time()
             log.write(
                 trial.index,
                 trial.outcome,
-                now - clock[0],
+                log.cpu_lap(),
                 world_seed=trial.world_seed,
                 succeeded=int(trial.succeeded),
                 collisions=trial.collisions,
@@ -255,7 +253,6 @@ def _bench(prior_map: bool, controller: str) -> Callable[[], list[Figure]]:
                 within_s=trial.within_s,
                 recoveries=trial.result.recoveries,
             )
-            clock[0] = now
             _progress(trial)
 
         res = forest_trials(

@@ -23,6 +23,7 @@ import json
 import math
 import os
 import subprocess
+import time
 from collections import Counter, defaultdict
 from collections.abc import Iterable, Mapping
 from pathlib import Path
@@ -83,6 +84,13 @@ class TrialLog:
         self.path = Path(path) if path else None
         self.set_name = set_name
         self.commit = code_version() if path else ""
+        self._cpu_mark = time.process_time()
+
+    def cpu_lap(self) -> float:
+        """CPU seconds of this process since the log was made or the last lap: one trial's cost."""
+        now = time.process_time()
+        lap, self._cpu_mark = now - self._cpu_mark, now
+        return lap
 
     def write(self, index: int, outcome: str, cpu_s: float, **fields: Any) -> None:
         if self.path is None:

@@ -19,7 +19,7 @@ import numpy as np
 from numba import njit
 from scipy.ndimage import distance_transform_edt
 
-from nav.raycast import _to_local
+from nav.raycast import _to_local, occupancy_mask
 from nav.types import GridGeometry
 
 BLOCKED = np.float32(-1.0)  # the clearance table's value for an occupied cell
@@ -174,11 +174,7 @@ class ClearanceTracer:
     """``trace_ray``'s table for one static occupancy mask, built once per map."""
 
     def __init__(self, occupied: np.ndarray, geometry: GridGeometry) -> None:
-        occupied = np.asarray(occupied, dtype=bool)
-        if occupied.shape != (geometry.height, geometry.width):
-            raise ValueError(
-                f"mask shape {occupied.shape} != grid (height, width) {(geometry.height, geometry.width)}"
-            )
+        occupied = occupancy_mask(occupied, geometry)
         self.geometry = geometry
         h, w = occupied.shape
         pad = np.zeros((h + 2, w + 2), dtype=bool)
