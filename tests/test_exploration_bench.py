@@ -120,3 +120,20 @@ def test_no_trial_starts_once_the_wall_budget_is_spent(monkeypatch, tmp_path):
     assert ran == [("apartment:0", 0), ("office:0", 0), ("apartment:1", 1)]
     assert [len(v) for v in runs.values()] == [2, 1]
     assert len(log.read_text().splitlines()) == 3
+
+
+def test_navigate_while_mapping_clicks_towards_a_goal_on_the_growing_map():
+    # one goal, a short horizon: exercises the frontier clicks (_toward) against the explorer's API
+    seen: list[tuple[int, bool]] = []
+    r = bx.navigate_while_mapping(
+        n_goals=1, per_goal_s=8.0, on_goal=lambda i, g, ok, t, c: seen.append((i, ok))
+    )
+    assert r["goals"] == 1.0 and [i for i, _ in seen] == [0]
+    assert r["collisions"] == 0.0 and r["sim_s"] >= 8.0
+
+
+def test_a_place_a_click_failed_at_is_not_clicked_again():
+    edges = bx.FrontierExplorer()
+    edges.mark_failed((1.0, 2.0))
+    assert bx._clicked_in_vain(edges, (1.0 + 0.9 * edges.options.blacklist_radius, 2.0))
+    assert not bx._clicked_in_vain(edges, (1.0 + 1.1 * edges.options.blacklist_radius, 2.0))
