@@ -12,8 +12,8 @@ opposite extreme cells of the largest free region), a 2000 x 2000 grid with 20 %
 cells (seed 0, corner to corner) and 20 MovingAI den312d scenarios (the first 20 of
 ``den312d-random-1.scen``, whose optimal octile lengths are checked; each round plans them
 ``SCENARIO_PASSES`` times). Both sides get the same
-traversability with unit cell weight; navdeck runs the planner's kernel (``nav.planning.bucket_search``:
-exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., allow_diagonal=True)``
+traversability with unit cell weight; navdeck runs the planner's kernel choice (``nav.planning.kernel``:
+on these uniform-cost grids the canonical-ordering kernel; exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., allow_diagonal=True)``
 (a diagonal step costs 1 and blocked corners may be cut: an easier problem).
 
 Scan matching inputs (Intel Research Lab log, 180-beam laser at base_link's origin): 50 consecutive
@@ -55,7 +55,7 @@ from bench.planning import _component_corners, _real_map_costmap
 from nav.control import DwaController, DwaOptions, NoValidControl
 from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
-from nav.planning.bucket_search import octile_search
+from nav.planning.kernel import octile_search
 from nav.slam.field import LikelihoodField
 from nav.slam.matcher import RefineOptions, SearchWindow, match_scan_with_fallback
 from nav.slam.metric import parse_relations, relative_poses
@@ -169,8 +169,8 @@ def willow_grid() -> tuple[np.ndarray, tuple[int, int], tuple[int, int]]:
 
 
 def navdeck_astar(passable: np.ndarray, start: tuple[int, int], goal: tuple[int, int]) -> float:
-    """Exact octile A* path cost start -> goal (navdeck's bucketed kernel, which also traces the
-    path as pyastar2d does); inf if unreachable."""
+    """Exact octile A* path cost start -> goal (the kernel the planner picks for a uniform-cost grid,
+    which also traces the path as pyastar2d does); inf if unreachable."""
     return octile_search(passable, start, goal)[0]
 
 
