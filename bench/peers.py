@@ -12,9 +12,10 @@ opposite extreme cells of the largest free region), a 2000 x 2000 grid with 20 %
 cells (seed 0, corner to corner) and 20 MovingAI den312d scenarios (the first 20 of
 ``den312d-random-1.scen``, whose optimal octile lengths are checked; each round plans them
 ``SCENARIO_PASSES`` times). Both sides get the same
-traversability with unit cell weight; navdeck runs the planner's kernel choice (``nav.planning.kernel``:
-on these uniform-cost grids the canonical-ordering kernel; exact octile, no corner cutting, path traced), pyastar2d runs ``astar_path(..., allow_diagonal=True)``
-(a diagonal step costs 1 and blocked corners may be cut: an easier problem).
+traversability with unit cell weight; navdeck runs the kernel the planner picks
+(``nav.planning.kernel``: on these uniform-cost grids the canonical-ordering one; exact octile,
+no corner cutting, path traced), pyastar2d runs ``astar_path(..., allow_diagonal=True)`` (a
+diagonal step costs 1 and blocked corners may be cut: an easier problem).
 
 Scan matching inputs (Intel Research Lab log, 180-beam laser at base_link's origin): 50 consecutive
 scan pairs (from scan ``CONSECUTIVE_START``) and the first 50 ground-truth relations of
