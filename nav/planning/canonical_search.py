@@ -342,4 +342,3 @@ class CanonicalSearch:
     def cost_to(self, row: int, col: int) -> float:
         """Accumulated step cost from the start to a closed cell."""
         return float(self.ws.g[self._flat(row, col)])
-
