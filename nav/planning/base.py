@@ -2,7 +2,8 @@
 
 ``GridPlanner`` does everything both concrete planners share: validate start and goal (typed
 errors), pick a goal cell within ``tolerance``, run the compiled 8-connected search under a
-wall-clock budget, fall back to the nearest reached cell within tolerance, smooth, and add headings.
+wall-clock budget (``nav.planning.kernel`` picks the kernel), fall back to the nearest reached cell
+within tolerance, smooth, and add headings.
 A* and Dijkstra differ only in the heuristic weight.
 """
 
@@ -15,7 +16,6 @@ from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-from nav.planning.bucket_search import BucketSearch
 from nav.planning.errors import (
     GoalOccupied,
     GoalOutsideMap,
@@ -26,6 +26,7 @@ from nav.planning.errors import (
 )
 from nav.planning.escape import descent_from_start
 from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND
+from nav.planning.kernel import make_search
 from nav.planning.smoothing import SmootherOptions, orientations, path_is_traversable, smooth_cells
 from nav.types import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION, Costmap, Path, Pose2D
 
@@ -171,7 +172,8 @@ class GridPlanner:
                 )
             target = near
 
-        state = BucketSearch(
+        # the pruned kernel on a uniform-cost grid, the bucket kernel on every real costmap
+        state = make_search(
             passable,
             costs,
             (sr, sc),
