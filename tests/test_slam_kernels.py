@@ -7,6 +7,7 @@ import math
 import numpy as np
 import pytest
 
+from bench import peers
 from nav.grid import LogOddsGrid, LogOddsOptions
 from nav.slam import kernels
 from nav.slam.field import LikelihoodField, field_reference
@@ -212,3 +213,82 @@ def test_compiled_top_level_scores_equal_the_reference_split_or_not(size: int) -
     cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
     ref = score_candidates_reference(field, 2, rows0, cols0, cand, 4)
     assert np.array_equal(fast.ravel(), ref)
+
+
+@pytest.mark.parametrize(("shape", "half"), [((37, 52), 1), ((40, 29), 2), ((25, 25), 3), ((3, 70), 5)])
+def test_compiled_window_max_equals_the_reference(shape: tuple[int, int], half: int) -> None:
+    rng = np.random.default_rng(half)
+    grid = np.where(rng.random(shape) < 0.1, rng.random(shape), 0.0).astype(np.float32)
+    field = LikelihoodField(grid, np.zeros(2), 0.05)
+    fast = kernels.window_max(field.field, half)
+    assert fast.shape == (shape[0] + 2 * half, shape[1] + 2 * half)
+    assert np.array_equal(fast, field.window_max_reference(half))
+    assert np.array_equal(field.window_max(half), fast)  # a field of an array: the exact pass
+
+
+@pytest.mark.parametrize("half", [1, 2, 4])
+def test_search_bounds_cover_the_window_max_as_the_field_grows(half: int) -> None:
+    # a field of points bounds by the spread kernel, a field of a grid by the exact window max;
+    # both are then raised by splats at new cells and must stay at least the true window max
+    rng = np.random.default_rng(half)
+    pts = rng.uniform(-3, 4, (120, 2))
+    g, _ = _world_grid(40 + half)
+    for field in (LikelihoodField.from_points(pts, 0.05), LikelihoodField.from_grid(g)):
+        bound = field.window_max(half)
+        assert (bound >= field.window_max_reference(half)).all()
+        for _ in range(3):
+            field.splat(rng.choice(field.field.size, 25, replace=False))
+            assert field.window_max(half) is bound  # updated in place, not rebuilt
+            assert (bound >= field.window_max_reference(half)).all()
+        assert bound.max() == 1.0
+
+
+def _plateau_field(seed: int) -> LikelihoodField:
+    """A field of few distinct values in flat blocks: many candidates score exactly the same."""
+    rng = np.random.default_rng(seed)
+    coarse = rng.choice(
+        np.array([0.0, 0.25, 0.5, 1.0], dtype=np.float32), (12, 12), p=[0.55, 0.15, 0.15, 0.15]
+    )
+    return LikelihoodField(np.kron(coarse, np.ones((5, 5), dtype=np.float32)), np.zeros(2), 0.05)
+
+
+@pytest.mark.parametrize("seed", range(8))
+def test_angle_pruned_exhaustive_search_equals_the_reference(seed: int) -> None:
+    # the bound-pruned search (no runner-up asked) against the numpy search over every candidate,
+    # bit for bit: on noisy scans of the box world (random priors and windows) and on plateaus,
+    # where exact ties between candidates (broken by the distance to the prior, then the order)
+    # are the rule
+    rng = np.random.default_rng(100 + seed)
+    g, pts = _world_grid(50 + seed)
+    world = LikelihoodField.from_grid(g)
+    plateau = _plateau_field(seed)
+    grid_pts = np.round(rng.uniform(0.2, 2.8, (60, 2)) / 0.05) * 0.05 - 1.5
+    cases = [
+        (world, pts, Pose2D(*rng.uniform([-0.1, -0.1, -0.15], [0.1, 0.1, 0.15]))),
+        (
+            LikelihoodField.from_points(pts, 0.05),
+            pts,
+            Pose2D(*rng.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])),
+        ),
+        (plateau, grid_pts, Pose2D(1.5, 1.5, rng.choice([0.0, 0.02]))),
+    ]
+    for field, p, prior in cases:
+        for half_width in (0.05, 0.1, 0.15):
+            window = SearchWindow(half_width, math.radians(rng.choice([2.0, 10.0])), math.radians(0.5))
+            fast = correlative_search_runner_up(field, p, prior, window, math.inf)
+            ref = correlative_search_reference(field, p, prior, window, math.inf)
+            assert fast == ref
+
+
+def test_angle_pruned_search_equals_the_reference_on_intel_pairs() -> None:
+    # the bench's 50 consecutive and 50 ground-truth relation pairs of the Intel lab log (the
+    # scan-to-scan field of the reference scan, the SLAM front end's narrow window)
+    if not (peers.INTEL_BAG.exists() and peers.INTEL_RELATIONS.exists()):
+        pytest.skip(f"{peers.INTEL_BAG} missing")
+    consecutive, related, _ = peers.intel_pairs()
+    matcher = peers.NavdeckScanMatcher()
+    for ref, cur, prior in consecutive + related:
+        field = LikelihoodField.from_points(peers._scan_points(ref), matcher.resolution, matcher.sigma)
+        pts = peers._scan_points(cur)
+        fast = correlative_search_runner_up(field, pts, prior, matcher.window, math.inf)
+        assert fast == correlative_search_reference(field, pts, prior, matcher.window, math.inf)

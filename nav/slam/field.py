@@ -31,6 +31,24 @@ def _kernel(sigma: float, resolution: float) -> np.ndarray:
     return k
 
 
+@functools.lru_cache(maxsize=16)
+def _window_kernel(sigma: float, resolution: float, half: int) -> np.ndarray:
+    """:func:`_kernel` spread by a +-``half`` cell window, dense ((2 (R + half) + 1)^2 float32
+    weights centred on the cell, R the kernel's radius): at each offset the largest weight within
+    ``half`` cells of it, so a splat of it is at least the window max of a splat of the kernel."""
+    k = _kernel(sigma, resolution)
+    rad = int(np.abs(k[:, :2]).max())
+    dense = np.zeros((2 * rad + 1, 2 * rad + 1), dtype=np.float32)
+    dense[k[:, 0].astype(int) + rad, k[:, 1].astype(int) + rad] = k[:, 2]  # as splat casts them
+    spread = np.zeros((2 * (rad + half) + 1,) * 2, dtype=np.float32)
+    for dy in range(2 * half + 1):
+        for dx in range(2 * half + 1):
+            view = spread[dy : dy + 2 * rad + 1, dx : dx + 2 * rad + 1]
+            np.maximum(view, dense, out=view)
+    spread.setflags(write=False)  # cached and shared
+    return spread
+
+
 class LikelihoodField:
     """``F`` sampled on the grid's cells; ``origin`` is the world point of cell (0, 0)'s corner."""
 
@@ -41,6 +59,11 @@ class LikelihoodField:
         self.origin = np.asarray(origin, dtype=float)
         self.resolution = float(resolution)
         self.pooled: list[np.ndarray] = [self.field]
+        self._window_max: dict[int, np.ndarray] = {}
+        # the cells whose kernels make up the whole field, when known (a field of points): its
+        # window maxima are then bounded by splatting a spread kernel there, cheaper than a pass
+        # over the grid
+        self._splatted: tuple[np.ndarray, np.ndarray] | None = None
         self.ensure_levels(levels)
 
     @classmethod
@@ -68,11 +91,12 @@ class LikelihoodField:
         (:func:`nav.slam.kernels.points_field`; numpy reference :meth:`from_points_reference`)."""
         if points.shape[0] == 0:
             raise ValueError("no points to build a likelihood field from")
-        f, lox, loy = kernels.points_field(
+        f, lox, loy, rows, cols = kernels.points_field(
             np.ascontiguousarray(points, dtype=np.float64), resolution, margin, _kernel(sigma, resolution)
         )
         obj = cls(f, np.array([lox, loy]), resolution, levels)
         obj.sigma = sigma
+        obj._splatted = (rows, cols)
         return obj
 
     @classmethod
@@ -98,12 +122,47 @@ class LikelihoodField:
         rows, cols = np.divmod(cells, self.field.shape[1])
         kernels.splat(self.field, rows, cols, _kernel(self.sigma, self.resolution))
         self.pooled = [self.field]
+        self._splatted = None
+        for half, bound in self._window_max.items():  # the window max of a max is the max of both
+            kernels.splat_dense(
+                bound, rows + half, cols + half, _window_kernel(self.sigma, self.resolution, half)
+            )
 
     def ensure_levels(self, levels: int) -> None:
         """Build max-pooled grids up to ``2^levels`` cells wide."""
         while len(self.pooled) <= levels:
             s = 1 << (len(self.pooled) - 1)
             self.pooled.append(kernels.max_pool(self.pooled[-1], s))
+
+    def window_max(self, half: int) -> np.ndarray:
+        """At least ``F``'s max over every cell's +-``half`` cell window, on a grid ``half`` cells
+        wider on each side (index (r + half, c + half) for cell (r, c)): the exhaustive search's
+        per-angle bound. Exactly the window max (:func:`nav.slam.kernels.window_max`) the first
+        time, or a splat of the spread kernel over a field of points' cells; kept up to date by
+        :meth:`splat` (splatting the spread kernel at the new cells: an upper bound, which is all
+        the search needs, never a pass over the grid per scan)."""
+        if half not in self._window_max:
+            if self._splatted is not None:
+                rows, cols = self._splatted
+                h, w = self.field.shape
+                bound = np.zeros((h + 2 * half, w + 2 * half), dtype=np.float32)
+                kernels.splat_dense(
+                    bound, rows + half, cols + half, _window_kernel(self.sigma, self.resolution, half)
+                )
+            else:
+                bound = kernels.window_max(self.field, half)
+            self._window_max[half] = bound
+        return self._window_max[half]
+
+    def window_max_reference(self, half: int) -> np.ndarray:
+        """Pure-numpy reference of :meth:`window_max` (the tests compare the two)."""
+        p = np.pad(self.field, 2 * half)
+        h, w = self.field.shape
+        out = np.zeros((h + 2 * half, w + 2 * half), dtype=self.field.dtype)
+        for dy in range(2 * half + 1):
+            for dx in range(2 * half + 1):
+                np.maximum(out, p[dy : dy + h + 2 * half, dx : dx + w + 2 * half], out=out)
+        return out
 
     def pooled_reference(self, level: int) -> np.ndarray:
         """Pure-numpy reference of ``pooled[level]`` (the tests compare it with the kernel's)."""

@@ -326,55 +326,114 @@ def splat(field: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernel: np.ndar
 
 
 @njit(cache=True, nogil=True)
+def window_max(grid: np.ndarray, half: int) -> np.ndarray:
+    """``out[r + half, c + half]`` = max of ``grid`` over ``[r - half, r + half] x [c - half, c +
+    half]`` (cells outside count 0), on a grid ``half`` cells wider on every side: the most any
+    point based at cell (r, c) can score over the offsets of a +-``half`` search window, so a sum
+    of these over an angle's points bounds every candidate at that angle. A chain of
+    :func:`max_pool` steps on the zero-padded grid (windows of 2, 4, ... cells, then the rest),
+    whose branch-free passes vectorize."""
+    h, w = grid.shape
+    span = 2 * half + 1
+    q = np.zeros((h + 4 * half, w + 4 * half), dtype=grid.dtype)
+    q[2 * half : 2 * half + h, 2 * half : 2 * half + w] = grid
+    width = 1  # q[r, c] is the max over the width x width block starting at (r, c)
+    while 2 * width <= span:
+        q = max_pool(q, width)
+        width *= 2
+    if width < span:  # two overlapping blocks of `width` cover `span`
+        q = max_pool(q, span - width)
+    return q[: h + 2 * half, : w + 2 * half].copy()
+
+
+@njit(cache=True, nogil=True)
+def splat_dense(field: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernel: np.ndarray) -> None:
+    """:func:`splat` of a dense square ``kernel`` ((2 R + 1)^2 weights centred on the cell), row
+    by row: ``field[r + dy, c + dx] = max(field, kernel[dy + R, dx + R])``, in place, the part
+    outside the grid skipped. Contiguous rows vectorize, unlike :func:`splat`'s offset list."""
+    h, w = field.shape
+    rad = kernel.shape[0] // 2
+    for i in range(rows.shape[0]):
+        r0, c0 = rows[i] - rad, cols[i] - rad
+        if r0 >= 0 and c0 >= 0 and r0 + 2 * rad < h and c0 + 2 * rad < w:  # the usual case
+            for j in range(2 * rad + 1):
+                for k in range(2 * rad + 1):
+                    v, kv = field[r0 + j, c0 + k], kernel[j, k]
+                    field[r0 + j, c0 + k] = kv if kv > v else v
+            continue
+        for j in range(max(-r0, 0), min(h - r0, 2 * rad + 1)):
+            for k in range(max(-c0, 0), min(w - c0, 2 * rad + 1)):
+                v, kv = field[r0 + j, c0 + k], kernel[j, k]
+                field[r0 + j, c0 + k] = kv if kv > v else v
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _before(a: int, dy: int, dx: int, ba: int, bdy: int, bdx: int) -> bool:
+    """(a, dy, dx) comes before (ba, bdy, bdx) in the search's (angle, dy, dx) order."""
+    return a < ba or (a == ba and (dy < bdy or (dy == bdy and dx < bdx)))
+
+
+@njit(cache=True, nogil=True)
 def exhaustive_search(
     grid: np.ndarray,
-    pts: np.ndarray,
-    cos_t: np.ndarray,
-    sin_t: np.ndarray,
-    px: float,
-    py: float,
-    ox: float,
-    oy: float,
-    res: float,
+    bound: np.ndarray,
+    rows0: np.ndarray,
+    cols0: np.ndarray,
     wc: int,
+    res: float,
     separation: float,
 ) -> tuple[int, int, int, float, float]:
-    """The exhaustive (single-level) correlative search in one pass: every angle ``a`` (its cos /
-    sin given), every cell offset (dy, dx) in [-wc, wc]^2. Returns the best (a, dy, dx), its
-    score (float32 mean ``grid`` value, 0 outside, summed as numpy sums) and the best score of the
-    candidates more than ``separation`` (m) from it (0 if none; not searched when ``separation``
-    is infinite). Ties go to the candidate nearest the prior (|dy| + |dx| + |a - centre|), then to
-    the first in (a, dy, dx) order, as in ``matcher.correlative_search_reference``."""
-    n = pts.shape[0]
-    na = cos_t.shape[0]
+    """The exhaustive (single-level) correlative search in one pass: every angle ``a``, every cell
+    offset (dy, dx) in [-wc, wc]^2 of the points' cells ``rows0`` / ``cols0`` (A, N) at that angle
+    (:func:`rotated_cells`). Returns the best (a, dy, dx), its score (float32 mean ``grid`` value,
+    0 outside, summed as numpy sums) and the best score of the candidates more than
+    ``separation`` (m) from it (0 if none; not searched when ``separation`` is infinite). Ties go
+    to the candidate nearest the prior (|dy| + |dx| + |a - centre|), then to the first in
+    (a, dy, dx) order, as in ``matcher.correlative_search_reference``.
+
+    Without a runner-up, angles are scored in the order of their bound (``bound`` is
+    :func:`window_max` of ``grid`` at ``wc``, or more) and the search stops at the
+    first angle whose bound is below the best score found: none of the rest can reach it, so the
+    result is the full search's, bit for bit (the tie-break compares (a, dy, dx) explicitly)."""
+    na, n = rows0.shape
     side = 2 * wc + 1
     runner = separation < math.inf
     phase = phase_split(grid, 1)
     scores = np.empty((na if runner else 1, side, side), dtype=np.float32)
     part = np.empty((8, side, side), dtype=np.float32)
     sums = np.empty((side, side), dtype=np.float32)
-    r0s = np.empty(n, dtype=np.int64)
-    c0s = np.empty(n, dtype=np.int64)
     nf = np.float32(n)
     centre = (na - 1) // 2
+    if runner:
+        order = np.arange(na)
+        ub = np.full(na, np.float32(np.inf))
+    else:
+        # each angle's points' window maxima, summed as the scores are: float32 rounding is
+        # monotone, so this is at least every score at that angle, bit for bit (an exact bound)
+        at_angle = np.zeros((na, 3), dtype=np.int64)
+        at_angle[:, 0] = np.arange(na)
+        ub = score_candidates(bound, rows0 + wc, cols0 + wc, at_angle, 1)
+        order = np.argsort(-ub)
     best = np.float32(-1.0)
     best_dist = 0
-    ba = bdy = bdx = 0
-    for a in range(na):
-        c, s = cos_t[a], sin_t[a]
-        for i in range(n):  # the same float64 operations as the reference's numpy expression
-            x = c * pts[i, 0] - s * pts[i, 1] + px
-            y = s * pts[i, 0] + c * pts[i, 1] + py
-            c0s[i] = math.floor((x - ox) / res) - wc
-            r0s[i] = math.floor((y - oy) / res) - wc
-        _block_sums(grid, phase, 1, r0s, c0s, side, part, sums)
+    ba, bdy, bdx = na, 0, 0
+    for a in order:
+        if ub[a] < best:
+            break  # sorted: no later angle can reach the best either
+        _block_sums(grid, phase, 1, rows0[a] - wc, cols0[a] - wc, side, part, sums)
         for j in range(side):
             for k in range(side):
                 sc = sums[j, k] / nf
                 if runner:
                     scores[a, j, k] = sc
+                if sc < best:
+                    continue
                 dist = abs(j - wc) + abs(k - wc) + abs(a - centre)
-                if sc > best or (sc == best and dist < best_dist):
+                if (
+                    sc > best
+                    or dist < best_dist
+                    or (dist == best_dist and _before(a, j - wc, k - wc, ba, bdy, bdx))
+                ):
                     best, best_dist, ba, bdy, bdx = sc, dist, a, j - wc, k - wc
     runner_up = np.float32(0.0)
     if runner:
@@ -463,11 +522,11 @@ def rotated_cells(
 @njit(cache=True, nogil=True)
 def points_field(
     points: np.ndarray, resolution: float, margin: float, kernel: np.ndarray
-) -> tuple[np.ndarray, float, float]:
+) -> tuple[np.ndarray, float, float, np.ndarray, np.ndarray]:
     """The likelihood field of the cells hit by (N, 2) ``points`` on a grid covering them plus
-    ``margin``, and the grid's origin (x, y), in one call: the same float64 operations as
-    ``LikelihoodField.from_points_reference``'s numpy expressions (so the same origin and cells),
-    then :func:`splat` of ``kernel``."""
+    ``margin``, the grid's origin (x, y) and the points' cells (rows, cols), in one call: the same
+    float64 operations as ``LikelihoodField.from_points_reference``'s numpy expressions (so the
+    same origin and cells), then :func:`splat` of ``kernel``."""
     lo = np.empty(2)
     hi = np.empty(2)
     for d in range(2):
@@ -485,4 +544,4 @@ def points_field(
         cols[i] = math.floor((points[i, 0] - lo[0]) / resolution)
         rows[i] = math.floor((points[i, 1] - lo[1]) / resolution)
     splat(field, rows, cols, kernel)
-    return field, lo[0], lo[1]
+    return field, lo[0], lo[1], rows, cols

@@ -56,6 +56,9 @@ class RefineOptions:
     tolerance: float = 1e-5
 
 
+_NO_BOUND = np.zeros((0, 0), dtype=np.float32)  # exhaustive_search without angle bounds
+
+
 @functools.lru_cache(maxsize=64)
 def _thinned(n: int, m: int) -> np.ndarray:
     """Indices of ``m`` of ``n`` points, evenly spread (cached: the same few scan sizes recur)."""
@@ -124,22 +127,6 @@ def _correlative(
     na = math.ceil(window.angular_search_window / window.angular_step)
     thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
     wc = math.ceil(window.linear_search_window / res)
-    if compiled and window.levels == 0:  # the front end's search: one compiled pass
-        a, dy, dx, best, runner_up = kernels.exhaustive_search(
-            field.field,
-            np.ascontiguousarray(pts, dtype=np.float64),
-            np.cos(thetas),
-            np.sin(thetas),
-            prior.x,
-            prior.y,
-            float(field.origin[0]),
-            float(field.origin[1]),
-            res,
-            wc,
-            separation,
-        )
-        pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
-        return pose, float(best), float(runner_up)
     if compiled:  # (A, N) cells of the points at each angle and zero offset
         rows0, cols0 = kernels.rotated_cells(
             np.ascontiguousarray(pts, dtype=np.float64),
@@ -155,6 +142,14 @@ def _correlative(
         rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2)
         cell = np.floor((rot - field.origin) / res).astype(np.int64)
         rows0, cols0 = cell[..., 1], cell[..., 0]
+    if compiled and window.levels == 0:  # the front end's search: one compiled pass
+        # the angle bounds are used only without a runner-up (which needs every score)
+        bound = field.window_max(wc) if separation == math.inf else _NO_BOUND
+        a, dy, dx, best, runner_up = kernels.exhaustive_search(
+            field.field, bound, rows0, cols0, wc, res, separation
+        )
+        pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+        return pose, float(best), float(runner_up)
     top = window.levels
     field.ensure_levels(top)
     s = 1 << top
