@@ -262,6 +262,7 @@ def test_angle_pruned_exhaustive_search_equals_the_reference(seed: int) -> None:
     g, pts = _world_grid(50 + seed)
     world = LikelihoodField.from_grid(g)
     plateau = _plateau_field(seed)
+    flat = LikelihoodField(np.full((80, 80), 0.5, dtype=np.float32), np.zeros(2), 0.05)
     grid_pts = np.round(rng.uniform(0.2, 2.8, (60, 2)) / 0.05) * 0.05 - 1.5
     cases = [
         (world, pts, Pose2D(*rng.uniform([-0.1, -0.1, -0.15], [0.1, 0.1, 0.15]))),
@@ -271,6 +272,9 @@ def test_angle_pruned_exhaustive_search_equals_the_reference(seed: int) -> None:
             Pose2D(*rng.uniform([-0.05, -0.05, -0.1], [0.05, 0.05, 0.1])),
         ),
         (plateau, grid_pts, Pose2D(1.5, 1.5, rng.choice([0.0, 0.02]))),
+        # one flat value everywhere: every candidate ties and so does every angle's bound with the
+        # best score; only the tie-break (the prior itself) may win
+        (flat, grid_pts, Pose2D(2.0, 2.0, 0.1)),
     ]
     for field, p, prior in cases:
         for half_width in (0.05, 0.1, 0.15):
