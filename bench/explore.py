@@ -98,9 +98,10 @@ def compare(built: OccupancyGrid, world, map_in_world: Pose2D, start: Pose2D) ->
     vals[inside] = built.data[br[inside], bc[inside]]
     known_free = (vals >= 0) & (vals <= FREE_MAX)
     near_wall = ndimage.binary_dilation(world.static_occupied, structure=np.ones((3, 3), bool))
-    # A free cell at a wall's face lies, on the map's offset lattice, in a cell that also covers the
-    # wall about half the time, and such a cell is occupied (nav/slam/render.py, surface wins): it
-    # is mapped as the wall's face, which the agreement below also counts as agreeing.
+    # A free cell at a wall's face often lies, on the map's offset and rotated lattice, in a cell that
+    # also covers the wall, and such a cell is occupied (nav/slam/render.py, surface wins; apartment:0:
+    # 1180 of the 1456 free cells next to a wall): it is mapped as the wall's face, which the
+    # agreement below also counts as agreeing.
     mapped = known_free | ((vals >= OCCUPIED_MIN) & near_wall[rows, cols])
     cell = wg.resolution * wg.resolution
     # every known cell of the built map, in the world
