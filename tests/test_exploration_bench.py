@@ -5,9 +5,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import ndimage
 
 import bench.explore as bx
-from nav.types import Pose2D
+from nav.types import GridGeometry, OccupancyGrid, Pose2D
 from robot.sim import World
 
 START = Pose2D(1.5, 1.5, 0.0)
@@ -25,6 +26,33 @@ def _two_rooms() -> World:
 def rooms():
     world = _two_rooms()
     return world, bx.sight(world, START, stride=0.4, beams=180)
+
+
+def _map_of(world: World, start: Pose2D, data: np.ndarray) -> OccupancyGrid:
+    """``data`` over the world's cells as a built map: in the map frame, which starts at ``start``."""
+    wg = world.geometry
+    origin = start.inverse().compose(wg.origin)
+    return OccupancyGrid(GridGeometry(wg.resolution, wg.width, wg.height, origin), data.astype(np.int8))
+
+
+def test_a_wall_face_mapped_occupied_is_explored_and_a_ghost_or_a_hole_is_not():
+    """The SLAM render makes a map cell that straddles a wall's face occupied (surface wins), so
+    the one-cell band of free cells along every wall is mapped as the face: explored, as the
+    agreement counts it. Occupied cells away from walls and unknown ones stay unexplored."""
+    world = _two_rooms()
+    start = Pose2D(1.5, 1.5, 0.3)
+    occupied = world.static_occupied
+    reach = bx.reachable_free(world, start)  # the two rooms: every free cell inside the walls
+    n = np.count_nonzero(reach)
+    face = ndimage.binary_dilation(occupied, structure=np.ones((3, 3), bool)) & reach
+    data = np.where(reach, 0, np.where(occupied, 100, -1))
+    data[face] = 100  # the walls one cell thicker on every face, as the render draws them
+    data[40:43, 40:43] = 100  # a ghost obstacle in the open
+    data[100:105, 30:35] = -1  # a hole never seen
+    cmp = bx.compare(_map_of(world, start, data), world, start, start)
+    assert cmp.explored == pytest.approx(1.0 - (9 + 25) / n)
+    assert cmp.explored_free == pytest.approx(1.0 - (np.count_nonzero(face & reach) + 9 + 25) / n)
+    assert cmp.agreement < 1.0  # the ghost obstacle disagrees
 
 
 def test_places_are_in_order_of_travel_and_see_the_reachable_free_area(rooms):

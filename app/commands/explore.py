@@ -69,7 +69,9 @@ class ExploreResult:
     reason: str
     explored_pct: float
     """Of the free area the robot can see from where it can go (``bench.explore.compare``), the
-    share its map knows as free (%)."""
+    share its map holds in agreement with the world: known free, or the wall's face (%)."""
+    explored_free_pct: float
+    """Of the same area, the share its map knows as free (%)."""
     explored_area_m2: float
     reachable_free_area_m2: float
     map_agreement_pct: float
@@ -215,6 +217,7 @@ def run_explore(cfg: ExploreConfig, world: World | None = None) -> ExploreResult
             state=status["state"] if elapsed < cfg.timeout else "timeout",
             reason=status["reason"],
             explored_pct=100.0 * cmp.explored,
+            explored_free_pct=100.0 * cmp.explored_free,
             explored_area_m2=cmp.explored_area_m2,
             reachable_free_area_m2=cmp.reachable_area_m2,
             map_agreement_pct=100.0 * cmp.agreement,
