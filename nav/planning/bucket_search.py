@@ -29,7 +29,7 @@ import threading
 import numpy as np
 from numba import njit
 
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2, solve
 from nav.planning.grid_search import _octile as octile_heuristic  # the heap kernel's, inlined
 
 # f-width of one bucket, in cells. Measured: with unit cells (random 20 %, Willow) 0.1, 0.25 and 0.5
@@ -405,6 +405,4 @@ def octile_search(
         width=width,
         workspace=workspace_for(h, w),
     )
-    if search.run(1 << 62) != FOUND:
-        return math.inf, None, search.expansions
-    return search.goal_cost, search.path, search.expansions
+    return solve(search)

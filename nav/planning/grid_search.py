@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 from numba import njit
@@ -35,6 +36,29 @@ SQRT2 = math.sqrt(2.0)
 FOUND = 0
 EXHAUSTED = 1
 BUDGET = 2
+
+
+class ResumableSearch(Protocol):
+    """What the compiled searches share: ``run(budget)`` until FOUND or EXHAUSTED, then the result."""
+
+    path: np.ndarray | None
+
+    def run(self, budget: int) -> int: ...
+
+    @property
+    def expansions(self) -> int: ...
+
+    @property
+    def goal_cost(self) -> float: ...
+
+
+def solve(search: ResumableSearch) -> tuple[float, np.ndarray | None, int]:
+    """Run ``search`` to the end: (goal cost, (N, 2) path cells, expansions); ``inf`` and None when
+    the goal is unreachable."""
+    if search.run(1 << 62) != FOUND:
+        return math.inf, None, search.expansions
+    return search.goal_cost, search.path, search.expansions
+
 
 # Neighbour offsets (d_row, d_col) and their base step lengths.
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)

@@ -9,13 +9,11 @@ A heuristic weight above 1 (not optimal either way) also keeps the bucket kernel
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 
 from nav.planning.bucket_search import BUCKET_WIDTH, BucketSearch, workspace_for
 from nav.planning.canonical_search import CanonicalSearch, uniform_cost
-from nav.planning.grid_search import FOUND
+from nav.planning.grid_search import solve
 
 GridSearch = BucketSearch | CanonicalSearch
 
@@ -96,6 +94,4 @@ def octile_search(
         width=width,
         shared_workspace=True,
     )
-    if search.run(1 << 62) != FOUND:
-        return math.inf, None, search.expansions
-    return search.goal_cost, search.path, search.expansions
+    return solve(search)
