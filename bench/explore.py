@@ -477,12 +477,6 @@ def _known(nav, target: Pose2D) -> bool:
     )
 
 
-def _clicked_in_vain(explorer: FrontierExplorer, goal: tuple[float, float]) -> bool:
-    """``goal`` lies within ``blacklist_radius`` of a place a click already failed at."""
-    r = explorer.options.blacklist_radius
-    return any(math.hypot(goal[0] - x, goal[1] - y) <= r for x, y in explorer.banned_places)
-
-
 def _toward(nav, explorer, target: Pose2D, pose: Pose2D, onward) -> Pose2D | None:
     """What an operator clicks to get to ``target`` (map frame) while mapping: the target itself
     once the map knows it as traversable, else the goal of the open edge of the map (a frontier)
@@ -495,7 +489,7 @@ def _toward(nav, explorer, target: Pose2D, pose: Pose2D, onward) -> Pose2D | Non
     best, score = None, math.inf
     for f in report.reachable:
         g = f.goal
-        if _clicked_in_vain(explorer, g) or math.hypot(g[0] - pose.x, g[1] - pose.y) < 0.4:
+        if explorer.is_banned(g) or math.hypot(g[0] - pose.x, g[1] - pose.y) < 0.4:
             continue
         s = f.travel + onward(g[0], g[1])
         if s < score:

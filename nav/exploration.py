@@ -217,6 +217,11 @@ class FrontierExplorer:
     def banned_places(self) -> list[tuple[float, float]]:
         return [xy for xy, f in zip(self.blacklist, self.forgiven, strict=True) if not f]
 
+    def is_banned(self, goal: tuple[float, float]) -> bool:
+        """``goal`` lies within ``blacklist_radius`` of a banned place (as ``find`` bans its cells)."""
+        r = self.options.blacklist_radius
+        return any(math.hypot(goal[0] - x, goal[1] - y) <= r for x, y in self.banned_places)
+
     def find(self, grid: OccupancyGrid, costmap: Costmap, robot: Pose2D) -> FrontierReport:
         """Frontiers of ``grid`` ranked for a robot at ``robot``; ``costmap`` must share the grid's
         geometry (the global costmap built from it)."""

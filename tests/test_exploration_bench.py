@@ -163,5 +163,7 @@ def test_navigate_while_mapping_clicks_towards_a_goal_on_the_growing_map():
 def test_a_place_a_click_failed_at_is_not_clicked_again():
     edges = bx.FrontierExplorer()
     edges.mark_failed((1.0, 2.0))
-    assert bx._clicked_in_vain(edges, (1.0 + 0.9 * edges.options.blacklist_radius, 2.0))
-    assert not bx._clicked_in_vain(edges, (1.0 + 1.1 * edges.options.blacklist_radius, 2.0))
+    assert edges.is_banned((1.0 + 0.9 * edges.options.blacklist_radius, 2.0))
+    assert not edges.is_banned((1.0 + 1.1 * edges.options.blacklist_radius, 2.0))
+    edges.forgive()  # a forgiven place may be clicked again
+    assert not edges.is_banned((1.0, 2.0))
