@@ -31,7 +31,7 @@ from nav.planning.bucket_search import BucketSearch
 from nav.planning.canonical_search import CanonicalSearch
 from nav.planning.grid_search import BUDGET, FOUND
 from nav.planning.kernel import make_search, octile_search
-from nav.types import LETHAL_OBSTACLE, Costmap, Pose2D
+from nav.types import Costmap, Pose2D
 
 GOLDEN = Path(__file__).parent / "data" / "planning_kernel_golden.json"
 STOCK = Path(__file__).resolve().parents[1] / "maps" / "stock"
@@ -68,7 +68,8 @@ def search_record(search: BucketSearch | CanonicalSearch, budget: int | None = N
         rec["path"] = digest(search.path)
     else:  # the planner falls back to a closed cell: a few of their paths
         cells = np.argwhere(closed)
-        rec["fallback_paths"] = [digest(np.column_stack(search.cells_to(*cell))) for cell in cells[:: max(1, len(cells) // 5)][:6]]
+        some = cells[:: max(1, len(cells) // 5)][:6]
+        rec["fallback_paths"] = [digest(np.column_stack(search.cells_to(*cell))) for cell in some]
     if budget is not None:
         rec["slices"] = digest(np.array(slices, dtype=np.int64))
     return rec
@@ -76,7 +77,11 @@ def search_record(search: BucketSearch | CanonicalSearch, budget: int | None = N
 
 def one_call_record(result: tuple[float, np.ndarray | None, int]) -> Record:
     cost, cells, expansions = result
-    return {"cost": float(cost).hex(), "expansions": expansions, "path": None if cells is None else digest(cells)}
+    return {
+        "cost": float(cost).hex(),
+        "expansions": expansions,
+        "path": None if cells is None else digest(cells),
+    }
 
 
 def plan_record(planner: AStarPlanner | DijkstraPlanner, cm: Costmap, start: Pose2D, goal: Pose2D) -> Record:
@@ -109,21 +114,36 @@ def random_grid_cases() -> Iterator[Case]:
         budget = None if seed % 3 else int(rng.integers(1, 200))
         if seed % 2:
             passable[goal] = True  # else blocked at times: unreachable
-        yield f"random/{seed}/canonical", lambda p=passable, s=start, g=goal, hw=hw, b=budget: search_record(
-            CanonicalSearch(p, s, g, heuristic_weight=hw), b
+        yield (
+            f"random/{seed}/canonical",
+            lambda p=passable, s=start, g=goal, hw=hw, b=budget: search_record(
+                CanonicalSearch(p, s, g, heuristic_weight=hw), b
+            ),
         )
-        yield f"random/{seed}/bucket", lambda p=passable, s=start, g=goal, hw=bucket_hw, wd=width, b=budget: (
-            search_record(BucketSearch(p, None, s, g, heuristic_weight=hw, width=wd), b)
+        yield (
+            f"random/{seed}/bucket",
+            lambda p=passable, s=start, g=goal, hw=bucket_hw, wd=width, b=budget: search_record(
+                BucketSearch(p, None, s, g, heuristic_weight=hw, width=wd), b
+            ),
         )
-        yield f"random/{seed}/costs", lambda p=passable, c=costs, s=start, g=goal, m=ctm, hw=bucket_hw, b=budget: (
-            search_record(BucketSearch(p, c, s, g, heuristic_weight=hw, cost_travel_multiplier=m), b)
+        yield (
+            f"random/{seed}/costs",
+            lambda p=passable, c=costs, s=start, g=goal, m=ctm, hw=bucket_hw, b=budget: search_record(
+                BucketSearch(p, c, s, g, heuristic_weight=hw, cost_travel_multiplier=m), b
+            ),
         )
         common = np.full((h, w), int(rng.integers(0, 253)), np.uint8)
-        yield f"random/{seed}/make_search", lambda p=passable, c=common, s=start, g=goal, m=ctm: search_record(
-            make_search(p, c, s, g, cost_travel_multiplier=m, shared_workspace=True)
+        yield (
+            f"random/{seed}/make_search",
+            lambda p=passable, c=common, s=start, g=goal, m=ctm: search_record(
+                make_search(p, c, s, g, cost_travel_multiplier=m, shared_workspace=True)
+            ),
         )
-        yield f"random/{seed}/octile_search", lambda p=passable, c=costs, s=start, g=goal, m=ctm: one_call_record(
-            octile_search(p, s, g, cost=c, cost_travel_multiplier=m)
+        yield (
+            f"random/{seed}/octile_search",
+            lambda p=passable, c=costs, s=start, g=goal, m=ctm: one_call_record(
+                octile_search(p, s, g, cost=c, cost_travel_multiplier=m)
+            ),
         )
 
 
@@ -144,7 +164,9 @@ def large_grid_cases() -> Iterator[Case]:
         passable[0, 0] = passable[-1, -1] = True
         costs = rng.integers(0, 253, passable.shape).astype(np.uint8)
         return search_record(
-            BucketSearch(passable, costs, (0, 0), (599, 699), heuristic_weight=hw, cost_travel_multiplier=2.0),
+            BucketSearch(
+                passable, costs, (0, 0), (599, 699), heuristic_weight=hw, cost_travel_multiplier=2.0
+            ),
             budget,
         )
 
@@ -154,7 +176,8 @@ def large_grid_cases() -> Iterator[Case]:
 
 
 def _costmaps() -> Iterator[tuple[str, Costmap]]:
-    maps = sorted(STOCK.glob("*.yaml")) + [
+    maps = [
+        *sorted(STOCK.glob("*.yaml")),
         ROS_MAPS / "navigation_stage/willow-full-0.05.yaml",
         ROS_MAPS / "nav2_bringup/tb3_sandbox.yaml",
         ROS_MAPS / "nav2_bringup/warehouse.yaml",
@@ -192,21 +215,38 @@ def costmap_cases() -> Iterator[Case]:
             for pname, planner in planners.items():
                 if pname == "dijkstra" and q > 1:
                     continue
-                yield f"costmap/{name}/{q}/{pname}", lambda p=planner, c=cm, s=start, g=goal: plan_record(p, c, s, g)
+                yield (
+                    f"costmap/{name}/{q}/{pname}",
+                    lambda p=planner, c=cm, s=start, g=goal: plan_record(p, c, s, g),
+                )
         (sr, sc), (gr, gc) = pairs[0]
         passable = cm.costs < 253
         passable[sr, sc] = passable[gr, gc] = True
-        yield f"costmap/{name}/raw", lambda p=passable, c=cm.costs, s=(sr, sc), g=(gr, gc): search_record(
-            BucketSearch(p, c, s, g, cost_travel_multiplier=2.0)
+        yield (
+            f"costmap/{name}/raw",
+            lambda p=passable, c=cm.costs, s=(sr, sc), g=(gr, gc): search_record(
+                BucketSearch(p, c, s, g, cost_travel_multiplier=2.0)
+            ),
         )
-        yield f"costmap/{name}/raw/resumed", lambda p=passable, c=cm.costs, s=(sr, sc), g=(gr, gc): search_record(
-            BucketSearch(p, c, s, g, cost_travel_multiplier=2.0), 1000
+        yield (
+            f"costmap/{name}/raw/resumed",
+            lambda p=passable, c=cm.costs, s=(sr, sc), g=(gr, gc): search_record(
+                BucketSearch(p, c, s, g, cost_travel_multiplier=2.0), 1000
+            ),
         )
 
 
 def movingai_cases() -> Iterator[Case]:
     """The first 30 scenarios of each MovingAI map present, on both kernels."""
-    for name in ("den312d", "maze-32-32-2", "random-32-32-10", "room-32-32-4", "room-64-64-8", "warehouse-10-20-10-2-1"):
+    names = (
+        "den312d",
+        "maze-32-32-2",
+        "random-32-32-10",
+        "room-32-32-4",
+        "room-64-64-8",
+        "warehouse-10-20-10-2-1",
+    )
+    for name in names:
         root = MAPF / name
         if not (root / f"{name}.map").exists():
             yield f"movingai/{name}", None
@@ -214,11 +254,13 @@ def movingai_cases() -> Iterator[Case]:
         passable = load_movingai_map(root / f"{name}.map")
         for k, (start, goal, _) in enumerate(load_scenarios(root / f"{name}-random-1.scen", 30)):
             budget = 64 if k % 5 == 0 else None  # some resumed in slices
-            yield f"movingai/{name}/{k}/canonical", lambda s=start, g=goal, p=passable, b=budget: search_record(
-                CanonicalSearch(p, s, g), b
+            yield (
+                f"movingai/{name}/{k}/canonical",
+                lambda s=start, g=goal, p=passable, b=budget: search_record(CanonicalSearch(p, s, g), b),
             )
-            yield f"movingai/{name}/{k}/bucket", lambda s=start, g=goal, p=passable: search_record(
-                BucketSearch(p, None, s, g)
+            yield (
+                f"movingai/{name}/{k}/bucket",
+                lambda s=start, g=goal, p=passable: search_record(BucketSearch(p, None, s, g)),
             )
 
 
@@ -230,17 +272,26 @@ def special_cases() -> Iterator[Case]:
     for kind in (CanonicalSearch, BucketSearch):
         args = (passable,) if kind is CanonicalSearch else (passable, None)
         for s, g in (((2, 2), (8, 8)), ((0, 0), (0, 0)), ((2, 2), (2, 2)), ((0, 0), (8, 0))):
-            yield f"special/{kind.__name__}/{s}/{g}", lambda k=kind, a=args, s=s, g=g: search_record(k(*a, s, g))
+            yield (
+                f"special/{kind.__name__}/{s}/{g}",
+                lambda k=kind, a=args, s=s, g=g: search_record(k(*a, s, g)),
+            )
     sealed = passable.copy()
     sealed[4, 8] = False
     yield "special/sealed", lambda: search_record(CanonicalSearch(sealed, (0, 0), (8, 8)))
     yield "special/sealed/bucket", lambda: search_record(BucketSearch(sealed, None, (0, 0), (8, 8)))
     floor = np.ones((400, 400), dtype=bool)
-    yield "special/floor/dijkstra", lambda: search_record(
-        CanonicalSearch(floor, (200, 200), (399, 399), heuristic_weight=0.0, width=3.0)
+    yield (
+        "special/floor/dijkstra",
+        lambda: search_record(
+            CanonicalSearch(floor, (200, 200), (399, 399), heuristic_weight=0.0, width=3.0)
+        ),
     )
-    yield "special/floor/bucket", lambda: search_record(
-        BucketSearch(floor, None, (200, 200), (399, 399), heuristic_weight=0.0, width=3.0)
+    yield (
+        "special/floor/bucket",
+        lambda: search_record(
+            BucketSearch(floor, None, (200, 200), (399, 399), heuristic_weight=0.0, width=3.0)
+        ),
     )
 
 
