@@ -5,6 +5,7 @@ with and without cell costs, and the MovingAI optimal lengths."""
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -12,11 +13,14 @@ from test_planning_reference import reference_costs
 
 from bench.datasets import MOVINGAI
 from bench.peers import load_movingai_map, load_scenarios
-from nav.planning.bucket_search import BucketSearch, octile_search, workspace_for
+from nav.planning import kernel
+from nav.planning.bucket_search import BucketSearch, workspace_for
 from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SearchState
 from nav.types import LETHAL_OBSTACLE
 
 SQRT2 = math.sqrt(2.0)
+# the one-call search on the bucket kernel alone (the canonical one would take the uniform grids)
+octile_search = partial(kernel.octile_search, canonical=False)
 
 
 def heap_cost(passable, cost, start, goal, weight, heuristic_weight) -> float:

@@ -6,6 +6,7 @@ which must leave every non-uniform costmap to the bucket kernel, path for path."
 from __future__ import annotations
 
 import math
+from functools import partial
 
 import numpy as np
 import pytest
@@ -18,13 +19,13 @@ from nav.costmap import Costmap2D, CostmapOptions
 from nav.planning import AStarPlanner, DijkstraPlanner, PlannerOptions
 from nav.planning import base as planner_base
 from nav.planning.bucket_search import BucketSearch, Workspace
-from nav.planning.bucket_search import octile_search as bucket_octile_search
 from nav.planning.canonical_search import CanonicalSearch, uniform_cost
 from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND
 from nav.planning.kernel import make_search, octile_search, uniform_step_scale
 from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, OccupancyGrid, Pose2D
 
 SQRT2 = math.sqrt(2.0)
+bucket_octile_search = partial(octile_search, canonical=False)
 
 
 def unit_cost(passable: np.ndarray) -> np.ndarray:
@@ -248,18 +249,6 @@ def inflated_costmap(seed: int) -> Costmap:
     return Costmap2D.from_map(grid, CostmapOptions(robot_radius=0.15)).costmap()
 
 
-def _bucket_only(passable, cost, start, goal, *, heuristic_weight, cost_travel_multiplier):
-    """The planner's search before the kernel choice: always the bucket kernel."""
-    return BucketSearch(
-        passable,
-        cost,
-        start,
-        goal,
-        heuristic_weight=heuristic_weight,
-        cost_travel_multiplier=cost_travel_multiplier,
-    )
-
-
 @pytest.mark.parametrize("seed", range(6))
 def test_planner_paths_on_non_uniform_costmaps_are_unchanged(seed: int, monkeypatch) -> None:
     # Navigation plans on inflated costmaps: the kernel choice must give exactly the bucket
@@ -278,7 +267,8 @@ def test_planner_paths_on_non_uniform_costmaps_are_unchanged(seed: int, monkeypa
         )
     planners = [AStarPlanner(), DijkstraPlanner(), AStarPlanner(PlannerOptions(cost_travel_multiplier=5.0))]
     now = [[p.plan_with_stats(cm, s, g) for s, g in queries] for p in planners]
-    monkeypatch.setattr(planner_base, "make_search", _bucket_only)
+    # the planner's search before the kernel choice: always the bucket kernel
+    monkeypatch.setattr(planner_base, "make_search", partial(make_search, canonical=False))
     before = [[p.plan_with_stats(cm, s, g) for s, g in queries] for p in planners]
     for got_all, ref_all in zip(now, before, strict=True):
         for (path, stats), (ref_path, ref_stats) in zip(got_all, ref_all, strict=True):
@@ -301,3 +291,22 @@ def test_planner_on_a_uniform_grid_is_optimal() -> None:
         assert stats.goal_reached_exactly and stats.search_cost == pytest.approx(ref, rel=1e-12)
         cells = np.floor(path.poses[:, [1, 0]]).astype(int)
         assert path_cost(cells, costs < 253, costs, 0.0) == pytest.approx(ref, rel=1e-12)
+
+
+def test_one_call_search_without_the_canonical_kernel_is_the_bucket_kernel() -> None:
+    # One entry point for both kernels: canonical=False must give exactly BucketSearch's answer,
+    # the default exactly CanonicalSearch's on a uniform grid.
+    rng = np.random.default_rng(21)
+    passable = rng.random((90, 110)) >= 0.25
+    passable[0, 0] = passable[-1, -1] = True
+    bucket = BucketSearch(passable, None, (0, 0), (89, 109))
+    pruned = CanonicalSearch(passable, (0, 0), (89, 109))
+    assert bucket.run(1 << 62) == FOUND and pruned.run(1 << 62) == FOUND
+    cost, cells, expansions = octile_search(passable, (0, 0), (89, 109), canonical=False)
+    assert (cost, expansions) == (bucket.goal_cost, bucket.expansions)
+    assert np.array_equal(cells, bucket.path)
+    cost, cells, expansions = octile_search(passable, (0, 0), (89, 109))
+    assert (cost, expansions) == (pruned.goal_cost, pruned.expansions)
+    assert np.array_equal(cells, pruned.path)
+    assert isinstance(make_search(passable, None, (0, 0), (89, 109), canonical=False), BucketSearch)
+    assert not isinstance(make_search(passable, None, (0, 0), (89, 109), canonical=False), CanonicalSearch)

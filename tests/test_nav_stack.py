@@ -15,7 +15,7 @@ from app.features.navigation import GoalRejected, NavigationRefused
 from app.modes import Mode
 from maps.stock import stock_world_path
 from nav.control.dwa import _prune
-from nav.planning.bucket_search import _search
+from nav.planning.bucket_search import _SEARCH
 from nav.types import Pose2D
 from robot.sim import World
 
@@ -409,5 +409,6 @@ def test_warm_up_runs_the_navigation_kernels_on_a_worker_before_any_goal(
         st.session.close()
     assert threads and threads[0].startswith("worker")  # off the loop thread
     assert set(timings) == {"costmaps", "plan", "dwa", "teb"}
-    assert _search.signatures and _prune.signatures  # the A* search and DWA's pruning are compiled
+    # the A* search (a costmap: the bucket kernel) and DWA's pruning are compiled
+    assert _SEARCH[False].signatures and _prune.signatures
     assert not [e for e in st.session.events if e["type"] == "navigation"]  # no goal was involved

@@ -5,6 +5,8 @@ Why buckets: a binary heap pays O(log open) sifts per push and pop; here the ope
 buckets of f-width ``BUCKET_WIDTH`` (Dial 1969), each a LIFO stack, so a push and a pop are O(1).
 LIFO inside a bucket expands the newest (deepest) cell first, the effect of breaking f ties towards
 the larger g. Measured 2x faster than the heap kernel on the 2000 x 2000 random grid and Willow.
+The canonical-ordering kernel (``canonical_search``) is this same compiled loop with its pruning
+switched on.
 
 Why it stays exact: a bucket holds f values up to ``BUCKET_WIDTH`` apart, so a cell may be expanded
 before its cheapest path is known. A later cheaper path re-opens it (label correcting), and the
@@ -13,10 +15,11 @@ explored passes an open cell whose f (a lower bound of its cost, the heuristic b
 at least that bound. Same rules and step costs as ``grid_search``: no corner cutting, step
 ``(1 or sqrt2) * (1 + cost_travel_multiplier * cost / 252)``, heuristic ``weight * octile``.
 
-Why few allocations: one byte per cell holds both traversability and search state (unseen, open,
-closed, blocked); ``g`` and ``parent`` are ``np.empty`` and read only where that byte says they are
-valid, so a search writes the grid once and then touches only the cells it reaches. ``octile_search``
-reuses one workspace per thread between calls on same-sized grids, so a small map's plan costs
+Why few allocations: one byte per cell holds traversability, search state (unseen, open, closed,
+blocked) and the direction the cell was reached by (the path is traced along it: no parent array);
+``g`` is ``np.empty`` and read only where that byte says it is valid, so a search writes the grid
+once and then touches only the cells it reaches. ``workspace_for`` keeps one workspace per thread
+between calls on same-sized grids (``kernel.octile_search`` uses it), so a small map's plan costs
 microseconds of set-up. Kernels are ``nogil``; ``run`` expands at most ``budget`` cells per call so
 the caller can check a wall-clock deadline between calls.
 """
@@ -25,12 +28,14 @@ from __future__ import annotations
 
 import math
 import threading
+from collections.abc import Callable
 
 import numpy as np
 from numba import njit
 
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2, solve
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2
 from nav.planning.grid_search import _octile as octile_heuristic  # the heap kernel's, inlined
+from nav.planning.prefetch import prefetch
 
 # f-width of one bucket, in cells. Measured: with unit cells (random 20 %, Willow) 0.1, 0.25 and 0.5
 # ran equally fast (1.0 expands 6 % more on the random grid); with Nav2's cost_travel_multiplier 2
@@ -40,7 +45,14 @@ BUCKET_WIDTH = 0.1
 
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
-_STEP = np.array([1.0, 1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2, SQRT2])
+_DIAGONAL = np.array([0, 0, 0, 0, 1, 1, 1, 1], dtype=np.int64)
+# the direction of (d_row, d_col), indexed by (d_row + 1) * 3 + d_col + 1
+_INDEX = np.full(9, -1, dtype=np.int64)
+for _k in range(8):
+    _INDEX[(_DR[_k] + 1) * 3 + _DC[_k] + 1] = _k
+
+_OPEN, _CLOSED, _BLOCKED = 1, 2, 3
+_START = 8  # the start's "direction": every neighbour is a successor
 
 # ctl slots: where a resumable search stands between calls
 _PHASE, _BUCKET, _LIVE, _EXPANSIONS = 0, 1, 2, 3
@@ -51,12 +63,14 @@ _GROW = 3
 
 
 @njit(cache=True, nogil=True)
-def _trace(parent: np.ndarray, node: int, w: int) -> np.ndarray:
-    """(N, 2) unpadded (row, col) cells of the parent chain ending at padded flat id ``node``."""
+def _trace(state: np.ndarray, start: int, node: int, w: int) -> np.ndarray:
+    """(N, 2) unpadded (row, col) cells from ``start`` to the reached cell ``node`` (padded flat
+    ids), stepping back along the direction each cell was reached by."""
     n = 1
     k = node
-    while parent[k] >= 0:
-        k = parent[k]
+    while k != start:
+        d = state[k] >> 2
+        k -= _DR[d] * w + _DC[d]
         n += 1
     cells = np.empty((n, 2), dtype=np.int64)
     k = node
@@ -64,7 +78,9 @@ def _trace(parent: np.ndarray, node: int, w: int) -> np.ndarray:
         r = k // w
         cells[i, 0] = r - 1
         cells[i, 1] = k - r * w - 1
-        k = parent[k]
+        if i > 0:
+            d = state[k] >> 2
+            k -= _DR[d] * w + _DC[d]
     return cells
 
 
@@ -88,135 +104,194 @@ def _fill(
                 padded_cost[base + 1 + c] = cost[r, c]
 
 
-@njit(cache=True, nogil=True)
-def _search(
-    passable: np.ndarray,
-    cost: np.ndarray,
-    use_cost: bool,
-    cost_factor: float,
-    heuristic_weight: float,
-    start: int,
-    goal: int,
-    width_f: float,
-    budget: int,
-    state: np.ndarray,
-    padded_cost: np.ndarray,
-    g: np.ndarray,
-    parent: np.ndarray,
-    buckets: np.ndarray,
-    counts: np.ndarray,
-    ctl: np.ndarray,
-    best_out: np.ndarray,
-) -> tuple[int, np.ndarray]:
-    """Expand up to ``budget`` cells of the search ``start -> goal`` (padded flat ids) over (H, W)
-    ``passable``; the first call (``ctl[_PHASE] == 0``) writes the grid and seeds the start.
+def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
+    """The compiled search, with ``canonical_search``'s pruning or without (module docstring)."""
 
-    ``state`` is the grid inside a border of blocked cells (no bounds checks), (H + 2) * (W + 2)
-    flat: 0 unseen, 1 open, 2 closed, 3 blocked; ``g`` and ``parent`` are valid where it is 1 or 2.
-    ``buckets`` (a ring of LIFO stacks of cell ids) and ``counts`` hold the open list; a cell may sit
-    in several stacks (its f dropped): only a pop that finds it open expands it. ``best_out[0]`` is
-    the goal's cost so far. Returns the status (FOUND, EXHAUSTED, BUDGET or _GROW) and, when FOUND,
-    the path's (N, 2) cells."""
-    w = passable.shape[1] + 2
-    n_buckets = counts.shape[0]
-    mask = n_buckets - 1
-    cap = buckets.shape[1]
-    inv = 1.0 / width_f
-    gr = goal // w
-    gc = goal - gr * w
-    sr = start // w
-    f0 = heuristic_weight * octile_heuristic(sr, start - sr * w, gr, gc)
-    if ctl[_PHASE] == 0:
-        _fill(passable, cost, use_cost, state, padded_cost)
-        counts[:] = 0
-        state[start] = 1
-        g[start] = 0.0
-        parent[start] = -1
-        buckets[0, 0] = start
-        counts[0] = 1
-        ctl[:] = 0
-        ctl[_PHASE] = 1
-        ctl[_LIVE] = 1
-        best_out[0] = 0.0 if start == goal else np.inf
-    best = best_out[0]
-    b = ctl[_BUCKET]
-    live = ctl[_LIVE]
-    done = 0
-    status = EXHAUSTED
-    fullest = cap  # an upper bound of the longest stack: recounted when it nears the capacity
-    while live > 0:
-        slot = b & mask
-        top = counts[slot]
-        if top == 0:
-            b += 1
-            continue
-        if f0 + b * width_f >= best:
-            break  # every open cell's f (a lower bound of a path through it) reaches the goal's cost
-        if done >= budget:
-            status = BUDGET
-            break
-        if fullest + 8 > cap:  # an expansion pushes at most 8 entries
-            fullest = counts.max()
-            if fullest + 8 > cap:
-                status = _GROW
-                break
-        top -= 1
-        counts[slot] = top
-        live -= 1
-        node = buckets[slot, top]
-        if state[node] != 1:
-            continue  # expanded already from a lower bucket (this entry is stale)
-        state[node] = 2
-        done += 1
-        r = node // w
-        c = node - r * w
-        gn = g[node]
-        for k in range(8):
-            dr = _DR[k]
-            dc = _DC[k]
-            nb = node + dr * w + dc
-            s = state[nb]
-            if s == 3:
-                continue
-            step = _STEP[k]
-            if use_cost:
-                step *= 1.0 + cost_factor * padded_cost[nb]
-            ng = gn + step
-            if s != 0 and ng >= g[nb]:
-                continue  # most neighbours end here, so the corner test comes after
-            if k >= 4 and (state[node + dc] == 3 or state[node + dr * w] == 3):
-                continue  # no cutting past a blocked corner
-            g[nb] = ng
-            parent[nb] = node
-            if nb == goal:
-                state[nb] = 2  # never expanded: its cost is all the search needs
-                best = ng
-                continue
-            f = ng + heuristic_weight * octile_heuristic(r + dr, c + dc, gr, gc)
-            if f >= best:
-                state[nb] = 2  # cannot lead to a cheaper goal path; g stays to keep worse ones out
-                continue
-            nbk = int((f - f0) * inv)
-            if nbk < b:
-                nbk = b  # rounding: a consistent heuristic never lowers f
-            state[nb] = 1
-            slot = nbk & mask
+    @njit(cache=True, nogil=True)
+    def search(
+        passable: np.ndarray,
+        cost: np.ndarray,
+        use_cost: bool,
+        cost_factor: float,
+        step_scale: float,
+        heuristic_weight: float,
+        start: int,
+        goal: int,
+        width_f: float,
+        budget: int,
+        state: np.ndarray,
+        padded_cost: np.ndarray,
+        g: np.ndarray,
+        buckets: np.ndarray,
+        counts: np.ndarray,
+        ctl: np.ndarray,
+        best_out: np.ndarray,
+    ) -> tuple[int, np.ndarray]:
+        """Expand up to ``budget`` cells of the search ``start -> goal`` (padded flat ids) over (H, W)
+        ``passable``; the first call (``ctl[_PHASE] == 0``) writes the grid and seeds the start. A
+        straight step costs ``step_scale`` (a diagonal one sqrt2 times that), times ``1 + cost_factor
+        * cost`` of the cell entered when ``use_cost``. ``canonical`` expands a cell only towards the
+        successors of ``canonical_search``'s pruning rules (valid on uniform-cost grids only), else
+        towards all 8 neighbours.
+
+        Both kernels are this one loop, so the open list, the stopping rule and the resumable state
+        exist once; ``canonical`` is a constant of each compiled version (the loop of the other is
+        not in it). Sharing them through ``inline="always"`` helpers instead measured 1.25-1.5x
+        slower: numba reference-counts the arrays handed to an inlined helper in the hot loop.
+
+        ``state`` is the grid inside a border of blocked cells (no bounds checks), (H + 2) * (W + 2)
+        flat; its low two bits are 0 unseen, 1 open, 2 closed, 3 blocked, the bits above them the
+        direction (0-7, 8 for the start) of the step that reached the cell: the pruning reads it, and
+        the path is traced back along it. ``g`` is valid where the cell is open or closed.
+        ``buckets`` (a ring of LIFO stacks of cell ids) and ``counts`` hold the open list; a cell may
+        sit in several stacks (its f dropped): only a pop that finds it open expands it.
+        ``best_out[0]`` is the goal's cost so far. Returns the status (FOUND, EXHAUSTED, BUDGET or
+        _GROW) and, when FOUND, the path's (N, 2) cells."""
+        w = passable.shape[1] + 2
+        n_buckets = counts.shape[0]
+        mask = n_buckets - 1
+        cap = buckets.shape[1]
+        inv = 1.0 / width_f
+        straight = step_scale
+        diagonal = step_scale * SQRT2
+        gr = goal // w
+        gc = goal - gr * w
+        sr = start // w
+        f0 = heuristic_weight * octile_heuristic(sr, start - sr * w, gr, gc)
+        if ctl[_PHASE] == 0:
+            _fill(passable, cost, use_cost, state, padded_cost)
+            counts[:] = 0
+            state[start] = _OPEN | (_START << 2)
+            g[start] = 0.0
+            buckets[0, 0] = start
+            counts[0] = 1
+            ctl[:] = 0
+            ctl[_PHASE] = 1
+            ctl[_LIVE] = 1
+            best_out[0] = 0.0 if start == goal else np.inf
+        best = best_out[0]
+        b = ctl[_BUCKET]
+        live = ctl[_LIVE]
+        done = 0
+        status = EXHAUSTED
+        fullest = cap  # an upper bound of the longest stack: recounted when it nears the capacity
+        successors = np.arange(8)
+        n_succ = 8
+        while live > 0:
+            slot = b & mask
             top = counts[slot]
-            buckets[slot, top] = nb
-            counts[slot] = top + 1
-            if top >= fullest:
-                fullest = top + 1
-            live += 1
-    ctl[_BUCKET] = b
-    ctl[_LIVE] = live
-    ctl[_EXPANSIONS] += done
-    best_out[0] = best
-    if status != EXHAUSTED:  # BUDGET or _GROW: the search goes on
-        return status, np.empty((0, 2), dtype=np.int64)
-    if best == np.inf:
-        return EXHAUSTED, np.empty((0, 2), dtype=np.int64)
-    ctl[_LIVE] = 0  # finished: a later run returns at once
-    return FOUND, _trace(parent, goal, w)
+            if top == 0:
+                b += 1
+                continue
+            if f0 + b * width_f >= best:
+                break  # every open cell's f (a lower bound of a path through it) reaches the goal's cost
+            if done >= budget:
+                status = BUDGET
+                break
+            if fullest + 8 > cap:  # an expansion pushes at most 8 entries
+                fullest = counts.max()
+                if fullest + 8 > cap:
+                    status = _GROW
+                    break
+            top -= 1
+            counts[slot] = top
+            live -= 1
+            node = buckets[slot, top]
+            if top > 0:  # the next pop, unless this expansion pushes onto the same stack
+                ahead = buckets[slot, top - 1]
+                prefetch(state, ahead)
+                prefetch(g, ahead)
+                prefetch(state, ahead - w)
+                prefetch(state, ahead + w)
+                prefetch(g, ahead - w)
+                prefetch(g, ahead + w)
+            byte = state[node]
+            if byte & 3 != _OPEN:
+                continue  # expanded already from a lower bucket (this entry is stale)
+            state[node] = byte + 1  # closed, the direction kept
+            done += 1
+            if canonical:  # the successors the pruning rules leave (canonical_search)
+                arrived = byte >> 2
+                if arrived == _START:
+                    for k in range(8):
+                        successors[k] = k
+                    n_succ = 8
+                else:
+                    adr = _DR[arrived]
+                    adc = _DC[arrived]
+                    successors[0] = arrived
+                    n_succ = 1
+                    if _DIAGONAL[arrived]:
+                        successors[1] = _INDEX[(adr + 1) * 3 + 1]
+                        successors[2] = _INDEX[3 + adc + 1]
+                        n_succ = 3
+                    else:
+                        d = adr * w + adc
+                        for side in (-1, 1):
+                            sdr = side * adc  # perpendicular to (adr, adc)
+                            sdc = side * adr
+                            s = node + sdr * w + sdc
+                            if state[s] != _BLOCKED and state[s - d] == _BLOCKED:
+                                successors[n_succ] = _INDEX[(sdr + 1) * 3 + sdc + 1]
+                                successors[n_succ + 1] = _INDEX[(sdr + adr + 1) * 3 + sdc + adc + 1]
+                                n_succ += 2
+            r = node // w
+            c = node - r * w
+            gn = g[node]
+            for j in range(n_succ):
+                k = successors[j] if canonical else j
+                dr = _DR[k]
+                dc = _DC[k]
+                nb = node + dr * w + dc
+                s_nb = state[nb]
+                if s_nb == _BLOCKED:
+                    continue
+                is_diagonal = k >= 4
+                step = diagonal if is_diagonal else straight
+                if not canonical and use_cost:  # one cost everywhere: in step_scale
+                    step *= 1.0 + cost_factor * padded_cost[nb]
+                ng = gn + step
+                if s_nb != 0 and ng >= g[nb]:
+                    continue  # most neighbours end here, so the corner test comes after
+                if is_diagonal and (state[node + dc] == _BLOCKED or state[node + dr * w] == _BLOCKED):
+                    continue  # no cutting past a blocked corner
+                g[nb] = ng
+                if nb == goal:
+                    state[nb] = _CLOSED | (k << 2)  # never expanded: its cost is all the search needs
+                    best = ng
+                    continue
+                f = ng + heuristic_weight * octile_heuristic(r + dr, c + dc, gr, gc)
+                if f >= best:
+                    state[nb] = _CLOSED | (k << 2)  # cannot lead to a cheaper goal path; g stays
+                    continue
+                nbk = int((f - f0) * inv)
+                if nbk < b:
+                    nbk = b  # rounding: a consistent heuristic never lowers f
+                state[nb] = _OPEN | (k << 2)
+                slot = nbk & mask
+                top = counts[slot]
+                buckets[slot, top] = nb
+                counts[slot] = top + 1
+                if top >= fullest:
+                    fullest = top + 1
+                live += 1
+        ctl[_BUCKET] = b
+        ctl[_LIVE] = live
+        ctl[_EXPANSIONS] += done
+        best_out[0] = best
+        if status != EXHAUSTED:  # BUDGET or _GROW: the search goes on
+            return status, np.empty((0, 2), dtype=np.int64)
+        if best == np.inf:
+            return EXHAUSTED, np.empty((0, 2), dtype=np.int64)
+        ctl[_LIVE] = 0  # finished: a later run returns at once
+        return FOUND, _trace(state, start, goal, w)
+
+    return search
+
+
+# both compiled once; ``canonical`` is a constant of each (numba prunes the other's branches, and
+# caches them apart: a closure's variables are part of its cache key)
+_SEARCH = {False: _make_search(False), True: _make_search(True)}
 
 
 class Workspace:
@@ -232,7 +307,6 @@ class Workspace:
         self.state = np.empty(n, dtype=np.uint8)
         self.cost = np.empty(n, dtype=np.uint8)
         self.g = np.empty(n)
-        self.parent = np.empty(n, dtype=np.int32)
         self.buckets = np.empty((0, 0), dtype=np.int32)
         self.counts = np.empty(0, dtype=np.int64)
 
@@ -278,7 +352,10 @@ class BucketSearch:
     ``passable`` (H, W) bool; ``cost`` (H, W) 0..255 cell costs (weighted only when
     ``cost_travel_multiplier`` is not 0); start/goal as (row, col). The start is expanded even if
     it is not passable (a robot may start in inflation); the goal must be passable (or be the
-    start). Without ``workspace`` the search gets arrays of its own."""
+    start). ``step_scale`` (>= 1, keeping the heuristic consistent) multiplies every step. Without
+    ``workspace`` the search gets arrays of its own."""
+
+    canonical = False  # the kernel's pruning (CanonicalSearch)
 
     def __init__(
         self,
@@ -289,6 +366,7 @@ class BucketSearch:
         *,
         heuristic_weight: float = 1.0,
         cost_travel_multiplier: float = 0.0,
+        step_scale: float = 1.0,
         width: float = BUCKET_WIDTH,
         workspace: Workspace | None = None,
     ) -> None:
@@ -297,9 +375,12 @@ class BucketSearch:
         gr, gc = int(goal[0]), int(goal[1])
         if not (0 <= sr < h and 0 <= sc < w and 0 <= gr < h and 0 <= gc < w):
             raise ValueError(f"start {start} or goal {goal} is outside the {h} x {w} grid")
-        if not (0.0 <= heuristic_weight < math.inf and 0.0 < width < math.inf):
+        if not (
+            0.0 <= heuristic_weight < math.inf and 1.0 <= step_scale < math.inf and 0.0 < width < math.inf
+        ):
             raise ValueError(
-                f"heuristic_weight must be finite >= 0 and width > 0: {heuristic_weight}, {width}"
+                "heuristic_weight must be finite >= 0, step_scale finite >= 1 and width > 0: "
+                f"{heuristic_weight}, {step_scale}, {width}"
             )
         self.use_cost = cost is not None and cost_travel_multiplier != 0.0
         if self.use_cost and cost.shape != passable.shape:
@@ -307,13 +388,14 @@ class BucketSearch:
         self.passable = passable
         self.cost = cost if self.use_cost else _NO_COST
         self.cost_factor = float(cost_travel_multiplier) / 252.0
+        self.step_scale = float(step_scale)
         self.heuristic_weight = float(heuristic_weight)
         self.width = float(width)
         self.shape = (h, w)
         self.start = (sr + 1) * (w + 2) + sc + 1
         self.goal = (gr + 1) * (w + 2) + gc + 1
         self.ws = workspace if workspace is not None else Workspace(h, w)
-        max_step = SQRT2 * (1.0 + self.cost_factor * 255.0) if self.use_cost else SQRT2
+        max_step = SQRT2 * self.step_scale * ((1.0 + self.cost_factor * 255.0) if self.use_cost else 1.0)
         self.ws.ring(_n_buckets(max_step, self.heuristic_weight, self.width))
         self.ctl = np.zeros(4, dtype=np.int64)
         self.best = np.empty(1)
@@ -324,35 +406,31 @@ class BucketSearch:
         ws = self.ws
         before = self.expansions
         while True:
-            status, cells = self._step(int(budget) - (self.expansions - before))
+            status, cells = _SEARCH[self.canonical](
+                self.passable,
+                self.cost,
+                self.use_cost,
+                self.cost_factor,
+                self.step_scale,
+                self.heuristic_weight,
+                self.start,
+                self.goal,
+                self.width,
+                int(budget) - (self.expansions - before),
+                ws.state,
+                ws.cost,
+                ws.g,
+                ws.buckets,
+                ws.counts,
+                self.ctl,
+                self.best,
+            )
             if status != _GROW:
                 break
             ws.grow()
         if status == FOUND:
             self.path = cells
         return int(status)
-
-    def _step(self, budget: int) -> tuple[int, np.ndarray]:
-        ws = self.ws
-        return _search(
-            self.passable,
-            self.cost,
-            self.use_cost,
-            self.cost_factor,
-            self.heuristic_weight,
-            self.start,
-            self.goal,
-            self.width,
-            budget,
-            ws.state,
-            ws.cost,
-            ws.g,
-            ws.parent,
-            ws.buckets,
-            ws.counts,
-            self.ctl,
-            self.best,
-        )
 
     @property
     def expansions(self) -> int:
@@ -367,42 +445,16 @@ class BucketSearch:
     def closed(self) -> np.ndarray:
         """(H, W) bool mask of the cells whose cost is final or that were expanded."""
         h, w = self.shape
-        return self.ws.state.reshape(h + 2, w + 2)[1:-1, 1:-1] == 2
+        return (self.ws.state.reshape(h + 2, w + 2)[1:-1, 1:-1] & 3) == _CLOSED
 
     def _flat(self, row: int, col: int) -> int:
         return (row + 1) * (self.shape[1] + 2) + col + 1
 
     def cells_to(self, row: int, col: int) -> tuple[np.ndarray, np.ndarray]:
         """(rows, cols) of the path start -> (row, col), which must be closed."""
-        cells = _trace(self.ws.parent, self._flat(row, col), self.shape[1] + 2)
+        cells = _trace(self.ws.state, self.start, self._flat(row, col), self.shape[1] + 2)
         return cells[:, 0], cells[:, 1]
 
     def cost_to(self, row: int, col: int) -> float:
         """Accumulated step cost from the start to a closed cell."""
         return float(self.ws.g[self._flat(row, col)])
-
-
-def octile_search(
-    passable: np.ndarray,
-    start: tuple[int, int],
-    goal: tuple[int, int],
-    *,
-    cost: np.ndarray | None = None,
-    cost_travel_multiplier: float = 0.0,
-    heuristic_weight: float = 1.0,
-    width: float = BUCKET_WIDTH,
-) -> tuple[float, np.ndarray | None, int]:
-    """Optimal (goal cost, (N, 2) path cells as (row, col) start first, expansions) in one call,
-    on this thread's reused workspace; cost ``inf`` and path None when the goal is unreachable."""
-    h, w = passable.shape
-    search = BucketSearch(
-        passable,
-        cost,
-        start,
-        goal,
-        heuristic_weight=heuristic_weight,
-        cost_travel_multiplier=cost_travel_multiplier,
-        width=width,
-        workspace=workspace_for(h, w),
-    )
-    return solve(search)

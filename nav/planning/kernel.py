@@ -43,12 +43,14 @@ def make_search(
     cost_travel_multiplier: float = 0.0,
     width: float = BUCKET_WIDTH,
     shared_workspace: bool = False,
+    canonical: bool = True,
 ) -> GridSearch:
     """The search ``start -> goal`` on the kernel this grid allows (module docstring); arguments as
-    ``BucketSearch``. ``shared_workspace`` uses this thread's reused arrays (one search at a time)."""
+    ``BucketSearch``. ``shared_workspace`` uses this thread's reused arrays (one search at a time);
+    ``canonical=False`` keeps the bucket kernel on every grid."""
     h, w = passable.shape
     workspace = workspace_for(h, w) if shared_workspace else None
-    scale = uniform_step_scale(passable, cost, cost_travel_multiplier)
+    scale = uniform_step_scale(passable, cost, cost_travel_multiplier) if canonical else None
     if scale is not None and scale >= 1.0 and 0.0 <= heuristic_weight <= 1.0:
         return CanonicalSearch(
             passable,
@@ -80,18 +82,21 @@ def octile_search(
     cost_travel_multiplier: float = 0.0,
     heuristic_weight: float = 1.0,
     width: float = BUCKET_WIDTH,
+    canonical: bool = True,
 ) -> tuple[float, np.ndarray | None, int]:
     """Optimal (goal cost, (N, 2) path cells as (row, col) start first, expansions) in one call on
-    the kernel ``make_search`` picks, with this thread's reused workspace; cost ``inf`` and path
-    None when the goal is unreachable."""
-    search = make_search(
-        passable,
-        cost,
-        start,
-        goal,
-        heuristic_weight=heuristic_weight,
-        cost_travel_multiplier=cost_travel_multiplier,
-        width=width,
-        shared_workspace=True,
+    the kernel ``make_search`` picks (the bucket kernel alone with ``canonical=False``), with this
+    thread's reused workspace; cost ``inf`` and path None when the goal is unreachable."""
+    return solve(
+        make_search(
+            passable,
+            cost,
+            start,
+            goal,
+            heuristic_weight=heuristic_weight,
+            cost_travel_multiplier=cost_travel_multiplier,
+            width=width,
+            shared_workspace=True,
+            canonical=canonical,
+        )
     )
-    return solve(search)
