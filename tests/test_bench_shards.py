@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from bench.scenarios.shards import TrialLog, budget_s, first_trial, read_lines, summarize
+from bench.scenarios.shards import TrialLog, budget_s, first_trial, only_trials, read_lines, summarize
 
 
 def test_first_trial_and_budget_read_the_environment() -> None:
@@ -21,6 +21,14 @@ def test_first_trial_and_budget_read_the_environment() -> None:
             first_trial("X_FIRST", {"X_FIRST": bad})
     with pytest.raises(ValueError, match="X_BUDGET"):
         budget_s("X_BUDGET", {"X_BUDGET": "0"})
+
+
+def test_only_lists_the_trials_to_re_run() -> None:
+    assert only_trials("X_ONLY", {}) is None
+    assert only_trials("X_ONLY", {"X_ONLY": "84,3,17"}) == {3, 17, 84}
+    for bad in ("", "3,,4", "-1", "one"):
+        with pytest.raises(ValueError, match="X_ONLY"):
+            only_trials("X_ONLY", {"X_ONLY": bad})
 
 
 def test_shards_of_one_commit_sum_into_one_set(tmp_path: Path) -> None:

@@ -22,13 +22,14 @@ from collections.abc import Callable
 from bench.core import Benchmark, Figure
 from bench.scenarios.families import FamilySet, FamilyTrial, describe, family_trials
 from bench.scenarios.issue5 import CONTROLLERS, trial_count
-from bench.scenarios.shards import TrialLog, budget_s, first_trial
+from bench.scenarios.shards import TrialLog, budget_s, first_trial, only_trials
 from robot.sim.worldgen import FAMILIES
 
 TRIALS_VAR = "NAVDECK_FAMILY_TRIALS"
 BUDGET_VAR = "NAVDECK_FAMILY_BUDGET_S"
 FIRST_VAR = "NAVDECK_FAMILY_FIRST"
 LOG_VAR = "NAVDECK_FAMILY_LOG"
+ONLY_VAR = "NAVDECK_FAMILY_ONLY"
 
 
 def _progress(trial: FamilyTrial) -> None:
@@ -97,13 +98,15 @@ def _bench(family: str, controller: str) -> Callable[[], list[Figure]]:
             _log_line(log, trial, log.cpu_lap())
             _progress(trial)
 
-        n = trial_count(TRIALS_VAR, 200)
+        picked = only_trials(ONLY_VAR)
+        if picked is None:
+            picked = frozenset(range(first, first + trial_count(TRIALS_VAR, 200)))
         res = family_trials(
             family,
-            first + n,
+            max(picked) + 1,
             controller=controller,
             on_trial=on_trial,
-            only=frozenset(range(first, first + n)),
+            only=picked,
             budget_s=budget_s(BUDGET_VAR),
         )
         return family_figures(res)

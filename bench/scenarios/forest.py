@@ -38,7 +38,7 @@ import numpy as np
 from app.commands.sim_nav import SimNavResult, SimStack, build_sim_stack, drive, unknown_grid
 from bench.core import Benchmark, Figure
 from bench.scenarios.issue5 import CONTROLLERS, trial_count
-from bench.scenarios.shards import TrialLog, budget_s, first_trial
+from bench.scenarios.shards import TrialLog, budget_s, first_trial, only_trials
 from nav.types import Pose2D
 from robot.safety import SafetyFilter
 from robot.sim.worldgen import generate
@@ -54,6 +54,7 @@ TRIALS_VAR = "NAVDECK_FOREST_TRIALS"
 BUDGET_VAR = "NAVDECK_FOREST_BUDGET_S"
 FIRST_VAR = "NAVDECK_FOREST_FIRST"
 LOG_VAR = "NAVDECK_FOREST_LOG"
+ONLY_VAR = "NAVDECK_FOREST_ONLY"
 
 
 @dataclass(frozen=True)
@@ -177,12 +178,13 @@ def forest_trials(
     on_trial: Callable[[ForestTrial], None] | None = None,
     budget_s: float | None = None,
     first: int = 0,
+    only: frozenset[int] | None = None,
 ) -> ForestSet:
-    """Trials ``first .. first + n - 1`` (fewer when ``budget_s`` CPU seconds run out: the set keeps
-    its true N)."""
+    """Trials ``first .. first + n - 1``, or the trials in ``only`` (fewer when ``budget_s`` CPU seconds
+    run out: the set keeps its true N)."""
     out = ForestSet(prior_map, controller)
     c0 = time.process_time()
-    for i in range(first, first + n):
+    for i in sorted(only) if only is not None else range(first, first + n):
         if budget_s is not None and time.process_time() - c0 > budget_s:
             break
         trial = forest_trial(i, seed, controller, prior_map)
@@ -262,6 +264,7 @@ def _bench(prior_map: bool, controller: str) -> Callable[[], list[Figure]]:
             on_trial=on_trial,
             budget_s=budget_s(BUDGET_VAR),
             first=first_trial(FIRST_VAR),
+            only=only_trials(ONLY_VAR),
         )
         return forest_figures(res)
 

@@ -10,7 +10,9 @@ Environment of the family and forest benches:
 
 - ``<PREFIX>_FIRST``: first trial index (default 0); the set runs ``first .. first + N - 1``;
 - ``<PREFIX>_LOG``: a JSONL file every trial is appended to as it ends;
-- ``<PREFIX>_BUDGET_S``: CPU seconds after which no new trial starts (the set keeps its true N).
+- ``<PREFIX>_BUDGET_S``: CPU seconds after which no new trial starts (the set keeps its true N);
+- ``<PREFIX>_ONLY``: a comma-separated list of trial indices to run instead of a range (to re-run, on
+  new code, the trials a change can affect).
 
 ``python -m bench.scenarios.shards LOG [LOG ...] [--commit SHA]`` prints, per set, N, the trial
 ranges present and the counts by outcome.
@@ -46,6 +48,20 @@ def budget_s(var: str, env: Mapping[str, str] = os.environ) -> float | None:
     """CPU seconds in ``var``, None when unset."""
     raw = env.get(var)
     return None if raw is None else _positive(var, raw)
+
+
+def only_trials(var: str, env: Mapping[str, str] = os.environ) -> frozenset[int] | None:
+    """The trial indices listed in ``var`` ("3,17,84"), None when unset."""
+    raw = env.get(var)
+    if raw is None:
+        return None
+    try:
+        picked = frozenset(int(part) for part in raw.split(","))
+    except ValueError:
+        picked = frozenset({-1})
+    if not picked or min(picked) < 0:
+        raise ValueError(f"{var} must list trial indices >= 0 separated by commas, got {raw!r}")
+    return picked
 
 
 def first_trial(var: str, env: Mapping[str, str] = os.environ) -> int:
