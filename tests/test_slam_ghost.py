@@ -238,3 +238,24 @@ def test_loop_closure_the_optimized_graph_rejects_is_dropped(monkeypatch: pytest
         ]
     )
     assert np.hypot(*(slam.node_poses()[:, :2] - true_xy).T).max() < 0.05
+
+
+def test_surface_in_one_submap_wins_over_free_in_others_when_asked() -> None:
+    """``surface_wins_across_submaps``: a wall cell one submap holds occupied (one return) and two
+    others saw as free (rays passing it at a glancing angle) stays occupied in the map; by default
+    the log-odds sum decides (free), so a walker one submap saw does not stay in the map."""
+    opt = SlamOptions().grid_options()
+    wall = np.full((10, 10), opt.l_free, dtype=np.float32)
+    wall[5, 5] = opt.l_occ  # one return landed here, in this submap only
+    passed = np.full((10, 10), 3 * opt.l_free, dtype=np.float32)
+    seen = np.ones((10, 10), dtype=bool)
+    layers = [(Pose2D(), np.zeros(2), g, seen) for g in (wall, passed, passed)]
+    probe = np.array([[0.275, 0.275], [0.125, 0.125]])  # the wall cell's centre, a free cell
+
+    def values(across: bool) -> np.ndarray:
+        grid = render_submaps(layers, opt, across).to_occupancy_grid()
+        r, c = grid.geometry.world_to_cell(probe)
+        return grid.data[r, c]
+
+    assert values(True)[0] > 50 and values(True)[1] < 25
+    assert values(False)[0] < 25
