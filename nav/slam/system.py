@@ -199,8 +199,8 @@ class SlamOptions:
     surface_wins_across_submaps: bool = False
     """Map rendering: a cell any submap holds occupied stays occupied whatever free evidence other
     submaps add (:func:`nav.slam.render.render_submaps`). Off: on the office's full loop it halved
-    the free cells left on true walls (57 -> 27) but it would keep a walker or a moved chair that
-    one submap saw in the map for good (docs/slam.md, "No ghost free space")."""
+    the free cells left on true walls (62 -> 29; greenhouse 51 -> 50) but it would keep a walker or
+    a moved chair that one submap saw in the map for good (docs/slam.md, "No ghost free space")."""
     optimize_every_n_nodes: int = 100
     """Back end optimizes after this many new nodes even without a new loop (Cartographer 90)."""
     constraint_translation_sigma: float = 0.02
