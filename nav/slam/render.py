@@ -83,8 +83,15 @@ def _surface_wins(
     return np.where(surface, best, val), ok | surface
 
 
-def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOddsGrid:
-    """Sum the submaps' log-odds into one grid in the map frame."""
+def render_submaps(
+    layers: list[SubmapLayer], options: LogOddsOptions, surface_wins_across_submaps: bool = False
+) -> LogOddsGrid:
+    """Sum the submaps' log-odds into one grid in the map frame.
+
+    ``surface_wins_across_submaps``: a map cell that any submap holds occupied (its
+    :func:`_surface_wins` value above 0: a return landed there more than rays passed) is at least
+    that occupied, whatever free evidence the other submaps add; off (the sum decides), because a
+    person or a moved chair that one submap saw would stay in the map for good."""
     res = options.resolution
     # one cell of margin: the map's extent is what was observed (a 1 m margin made every saved map
     # 2 m wider and taller than the building)
@@ -96,6 +103,7 @@ def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOdd
     out.ensure_contains(allc)
     acc = np.zeros(out.shape, dtype=np.float32)
     seen = np.zeros(out.shape, dtype=bool)
+    top = np.zeros(out.shape, dtype=np.float32) if surface_wins_across_submaps else None
     for pose, origin, lo, sn in layers:
         c = _corners(pose, origin, lo.shape, res)
         c0 = np.floor((c.min(axis=0) - out.origin) / res).astype(int)
@@ -111,6 +119,10 @@ def render_submaps(layers: list[SubmapLayer], options: LogOddsOptions) -> LogOdd
         sub = (slice(c0[1], c1[1]), slice(c0[0], c1[0]))
         acc[sub] += val
         seen[sub] |= ok
+        if top is not None:
+            top[sub] = np.maximum(top[sub], val)
+    if top is not None:  # (top holds max(0, the most occupied submap value))
+        acc = np.where(top > 0.0, np.maximum(acc, top), acc)
     # cut to the observed cells: the corners of rotated submaps span more than they observed
     rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
     if rows.size:
