@@ -158,8 +158,8 @@ def test_slam_see_through_reads_the_evidence_not_the_surface_wins_render() -> No
     slam.run_backend()
     rate = slam_see_through_rate(slam, scans, 8.0, every=1)
     assert rate < 0.01
-    # the evidence map holds fewer occupied cells than the display map, never more
+    # same grid as the saved map, fewer occupied cells (no widened walls), a lower rate
     evidence, shown = slam.evidence_map(), slam.map()
     assert evidence.geometry == shown.geometry
-    assert not (evidence.occupied_mask() & ~shown.occupied_mask()).any()
+    assert evidence.occupied_mask().sum() < shown.occupied_mask().sum()
     assert see_through_rate(shown, slam.trajectory(sensor=True)[:, 1:], scans, 8.0, every=1) > rate
