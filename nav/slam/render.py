@@ -84,14 +84,21 @@ def _surface_wins(
 
 
 def render_submaps(
-    layers: list[SubmapLayer], options: LogOddsOptions, surface_wins_across_submaps: bool = False
+    layers: list[SubmapLayer],
+    options: LogOddsOptions,
+    surface_wins_across_submaps: bool = False,
+    surface_wins: bool = True,
 ) -> LogOddsGrid:
     """Sum the submaps' log-odds into one grid in the map frame.
 
     ``surface_wins_across_submaps``: a map cell that any submap holds occupied (its
     :func:`_surface_wins` value above 0: a return landed there more than rays passed) is at least
     that occupied, whatever free evidence the other submaps add; off (the sum decides), because a
-    person or a moved chair that one submap saw would stay in the map for good."""
+    person or a moved chair that one submap saw would stay in the map for good.
+
+    ``surface_wins=False``: plain nearest-neighbour resampling, each submap's evidence placed
+    without widening its surfaces (what the map-consistency measure reads: it tests the poses, not
+    this display rule)."""
     res = options.resolution
     # one cell of margin: the map's extent is what was observed (a 1 m margin made every saved map
     # 2 m wider and taller than the building)
@@ -115,7 +122,8 @@ def render_submaps(
         gx = out.origin[0] + (cols + 0.5) * res
         gy = out.origin[1] + (rows + 0.5) * res
         xx, yy = np.meshgrid(gx, gy)
-        val, ok = _surface_wins(pose, origin, lo, sn, xx, yy, res)
+        place = _surface_wins if surface_wins else _lookup
+        val, ok = place(pose, origin, lo, sn, xx, yy, res)
         sub = (slice(c0[1], c1[1]), slice(c0[0], c1[0]))
         acc[sub] += val
         seen[sub] |= ok

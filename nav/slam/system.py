@@ -37,7 +37,7 @@ from nav.slam.matcher import (
     translation_information,
 )
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
-from nav.slam.render import render_submaps
+from nav.slam.render import SubmapLayer, render_submaps
 from nav.slam.submap import Submap
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
@@ -836,16 +836,33 @@ class GraphSlam:
             n = len(self._nodes)
             if self._map is not None and self._map_nodes == n:
                 return self._map
-            grids = []
-            for j, sm in enumerate(self._submaps):
-                g = sm.grid
-                pose = Pose2D.from_array(self._submap_global[j])
-                grids.append((pose, g.origin.copy(), g.logodds.copy(), g.seen.copy()))
+            grids = self._submap_layers()
         grid = render_submaps(grids, self.options.grid_options(), self.options.surface_wins_across_submaps)
         out = grid.to_occupancy_grid()
         with self._lock:
             self._map, self._map_nodes = out, n
         return out
+
+    def evidence_map(self) -> OccupancyGrid:
+        """The submaps placed at their latest map poses by plain nearest-neighbour resampling,
+        without :meth:`map`'s "surface wins" widening of every surface: what map-consistency checks
+        read (:func:`nav.slam.consistency.slam_see_through_rate`), so that they judge the poses
+        and not the display rule. Not cached (offline evaluation)."""
+        with self._lock:
+            grids = self._submap_layers()
+        return render_submaps(grids, self.options.grid_options(), surface_wins=False).to_occupancy_grid()
+
+    def _submap_layers(self) -> list[SubmapLayer]:
+        """Copies of the submaps' grids with their map poses (caller holds the lock)."""
+        return [
+            (
+                Pose2D.from_array(self._submap_global[j]),
+                sm.grid.origin.copy(),
+                sm.grid.logodds.copy(),
+                sm.grid.seen.copy(),
+            )
+            for j, sm in enumerate(self._submaps)
+        ]
 
     def trajectory(self, sensor: bool = False) -> np.ndarray:
         """(N, 4) ``t, x, y, theta`` of base_link in the map frame, one row per ``add_scan`` call.
