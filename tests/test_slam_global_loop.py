@@ -158,7 +158,7 @@ def test_slam_see_through_reads_the_evidence_not_the_surface_wins_render() -> No
         slam.optimize_if_due()
     slam.run_backend()
     rate = slam_see_through_rate(slam, scans, 8.0, every=1)
-    assert rate < 0.015
+    assert rate < 0.03  # between this run's 1.2 % and a fold's > 5 %: other CPUs may round otherwise
     # same grid as the saved map, fewer occupied cells (no widened walls), a lower rate
     evidence, shown = slam.evidence_map(), slam.map()
     assert evidence.geometry == shown.geometry
