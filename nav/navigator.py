@@ -285,18 +285,10 @@ class Navigator:
             self._cancel_requested = True
 
     def resume(self) -> None:
-        """Leave STUCK after a recovery behaviour: reset progress tracking and the controller's
-        patience, and replan. The controller starts over on the path as Nav2's controller server
-        does on the fresh FollowPath goal its tree sends after a recovery: with the failure count
-        kept, one cycle without a valid command raised ``PatienceExceeded`` again at once, and a
-        walker standing in a doorway spent three recoveries in 0.3 s (apartment family trial 61,
-        TEB)."""
+        """Leave STUCK after a recovery behaviour: reset progress tracking and replan."""
         if self.state == NavState.STUCK:
             self._clear_stuck()
             self.progress_checker.reset()
-            if self._path is not None:
-                self.controller.reset()
-                self.controller.set_path(self._path)
             self._force_plan = "resume"
 
     def halt(self, reason: str, message: str) -> None:

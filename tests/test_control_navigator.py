@@ -222,34 +222,6 @@ def test_controller_patience_exceeded_is_stuck_with_its_name() -> None:
     assert ticks[first - 1].feedback.activity.startswith("no safe trajectory")
 
 
-def test_resume_gives_the_controller_its_full_patience_again() -> None:
-    """After a recovery the controller starts over (Nav2's fresh FollowPath goal): in the pocket
-    above it is again allowed ``failure_tolerance`` of cycles without a valid trajectory before
-    ``PatienceExceeded``, instead of raising it on the first one (the failure count was kept, so
-    one blocked moment spent a recovery per tick: apartment family trial 61, TEB)."""
-    occ = room()
-    occ[55:66, 15:26] = True
-    occ[58:63, 18:23] = False
-    cm = inflate(occ, inscribed=0.1)
-    nav = make_nav(
-        planner=None,
-        plan_fn=lambda costmap, start, goal: Path(np.array([[start.x, start.y, 0.0], [goal.x, goal.y, 0.0]])),
-    )
-    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
-    pose = Pose2D(1.025, 3.025, 0.0)
-    ticks, _ = run(nav, pose, cm, 2.0)
-    first = [t.state for t in ticks].index(NavState.STUCK)
-    assert ticks[first].feedback.stuck_reason == "PatienceExceeded"
-    nav.resume()
-    again, _ = run(nav, pose, cm, 2.0, start=len(ticks) * DT)
-    states = [t.state for t in again]
-    assert NavState.STUCK in states
-    second = states.index(NavState.STUCK)
-    assert again[second].feedback.stuck_reason == "PatienceExceeded"
-    assert second == first  # the same number of failed cycles as the first time
-    assert all(t.feedback.activity.startswith("no safe trajectory") for t in again[:second])
-
-
 def test_set_goals_validates() -> None:
     nav = make_nav()
     with pytest.raises(ValueError):
