@@ -270,16 +270,38 @@ def translation_information(pts: np.ndarray, theta: float, half_window: int = 3)
     ``half_window`` neighbours on each side, kept only where those points are collinear (a wall,
     not a corner or a jump between two surfaces). The scan's geometry is used, not the map's field:
     a field built from noisy scans ripples along a straight wall, which looks like information
-    along it that is not there."""
-    n = pts.shape[0]
-    if n < 2 * half_window + 1:
+    along it that is not there. The windows' moments come from a compiled kernel
+    (:func:`nav.slam.kernels.window_moments`, bit-identical to numpy's)."""
+    if pts.shape[0] < 2 * half_window + 1:
         return np.zeros((2, 2))
+    moments = kernels.window_moments(np.ascontiguousarray(pts, dtype=np.float64), half_window)
+    return _information_from_moments(*moments, theta, half_window)
+
+
+def translation_information_reference(pts: np.ndarray, theta: float, half_window: int = 3) -> np.ndarray:
+    """Pure-numpy reference of :func:`translation_information` (the tests compare the two)."""
+    if pts.shape[0] < 2 * half_window + 1:
+        return np.zeros((2, 2))
+    return _information_from_moments(*window_moments_reference(pts, half_window), theta, half_window)
+
+
+def window_moments_reference(pts: np.ndarray, half_window: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pure-numpy reference of :func:`nav.slam.kernels.window_moments`."""
+    n = pts.shape[0]
     idx = np.arange(n)[:, None] + np.arange(-half_window, half_window + 1)[None, :]
     idx = np.clip(idx, 0, n - 1)
     win = pts[idx]  # (N, W, 2)
     d = win - win.mean(axis=1, keepdims=True)
     cxx, cyy = (d[..., 0] ** 2).mean(axis=1), (d[..., 1] ** 2).mean(axis=1)
     cxy = (d[..., 0] * d[..., 1]).mean(axis=1)
+    return cxx, cyy, cxy
+
+
+def _information_from_moments(
+    cxx: np.ndarray, cyy: np.ndarray, cxy: np.ndarray, theta: float, half_window: int
+) -> np.ndarray:
+    """:func:`translation_information` from the windows' second moments."""
+    n = cxx.shape[0]
     along = 0.5 * np.arctan2(2 * cxy, cxx - cyy) + theta  # the line's direction, rotated
     spread = np.hypot(0.5 * (cxx - cyy), cxy)
     lam_hi, lam_lo = 0.5 * (cxx + cyy) + spread, 0.5 * (cxx + cyy) - spread
