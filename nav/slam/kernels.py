@@ -579,3 +579,39 @@ def window_moments(pts: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray, 
             c += dx[k] * dy[k]
         cxx[i], cyy[i], cxy[i] = a / w, b / w, c / w
     return cxx, cyy, cxy
+
+
+@njit(cache=True, nogil=True)
+def surface_lines(pts: np.ndarray, half: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`nav.slam.matcher.surface_lines` from :func:`window_moments` without numpy's
+    per-call overhead (a dozen small array operations per scan); the same libm calls in the same
+    order, so bit-identical to :func:`nav.slam.matcher.surface_lines_reference`."""
+    cxx, cyy, cxy = window_moments(pts, half)
+    n = pts.shape[0]
+    along = np.empty(n)
+    line = np.zeros(n, dtype=np.bool_)
+    for i in range(n):
+        along[i] = 0.5 * np.arctan2(2 * cxy[i], cxx[i] - cyy[i])
+        spread = np.hypot(0.5 * (cxx[i] - cyy[i]), cxy[i])
+        hi = 0.5 * (cxx[i] + cyy[i]) + spread
+        lo = 0.5 * (cxx[i] + cyy[i]) - spread
+        line[i] = lo <= 0.05 * hi and hi > 0 and half <= i < n - half
+    return along, line
+
+
+@njit(cache=True, nogil=True)
+def surface_normals(along: np.ndarray, line: np.ndarray, theta: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals ``(-sin, cos)`` of the lines ``along + theta`` where ``line`` holds."""
+    k = 0
+    for i in range(along.shape[0]):
+        if line[i]:
+            k += 1
+    nx, ny = np.empty(k), np.empty(k)
+    k = 0
+    for i in range(along.shape[0]):
+        if line[i]:
+            a = along[i] + theta
+            nx[k] = -np.sin(a)
+            ny[k] = np.cos(a)
+            k += 1
+    return nx, ny

@@ -264,13 +264,12 @@ def surface_lines(pts: np.ndarray, half_window: int = 3) -> tuple[np.ndarray, np
     """Per point of a scan in beam order: the direction (rad, in the points' frame) of the line
     through it and its ``half_window`` neighbours on each side, and whether those points are
     collinear (a wall, not a corner or a jump between two surfaces; False at the scan's ends).
-    The windows' moments come from a compiled kernel (:func:`nav.slam.kernels.window_moments`,
-    bit-identical to numpy's; :func:`surface_lines_reference` is the numpy version)."""
+    Compiled (:func:`nav.slam.kernels.surface_lines`, bit-identical to the numpy version
+    :func:`surface_lines_reference`)."""
     n = pts.shape[0]
     if n < 2 * half_window + 1:
         return np.zeros(n), np.zeros(n, dtype=bool)
-    moments = kernels.window_moments(np.ascontiguousarray(pts, dtype=np.float64), half_window)
-    return _lines_from_moments(*moments, half_window)
+    return kernels.surface_lines(np.ascontiguousarray(pts, dtype=np.float64), half_window)
 
 
 def surface_lines_reference(pts: np.ndarray, half_window: int = 3) -> tuple[np.ndarray, np.ndarray]:
@@ -316,8 +315,17 @@ def translation_information(pts: np.ndarray, theta: float, half_window: int = 3)
     line, where there is one. The scan's geometry is used, not the map's field:
     a field built from noisy scans ripples along a straight wall, which looks like information
     along it that is not there."""
-    n = pts.shape[0]
     along, line = surface_lines(pts, half_window)
+    if not line.any():
+        return np.zeros((2, 2))
+    nx, ny = kernels.surface_normals(along, line, theta)  # the lines' directions, rotated
+    return np.array([[nx @ nx, nx @ ny], [nx @ ny, ny @ ny]]) / pts.shape[0]
+
+
+def translation_information_reference(pts: np.ndarray, theta: float, half_window: int = 3) -> np.ndarray:
+    """Pure-numpy reference of :func:`translation_information` (the tests compare the two)."""
+    n = pts.shape[0]
+    along, line = surface_lines_reference(pts, half_window)
     if not line.any():
         return np.zeros((2, 2))
     along = along[line] + theta  # the line's direction, rotated
