@@ -20,6 +20,11 @@ from nav.slam.matcher import (
     refine_pose,
     refine_pose_reference,
     score_candidates_reference,
+    surface_lines,
+    surface_lines_reference,
+    translation_information,
+    translation_information_reference,
+    window_moments_reference,
 )
 from nav.slam.synthetic import box_world, cast_scan
 from nav.types import Pose2D
@@ -296,3 +301,26 @@ def test_angle_pruned_search_equals_the_reference_on_intel_pairs() -> None:
         pts = peers._scan_points(cur)
         fast = correlative_search_runner_up(field, pts, prior, matcher.window, math.inf)
         assert fast == correlative_search_reference(field, pts, prior, matcher.window, math.inf)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2, 3])
+def test_compiled_window_moments_and_surface_lines_equal_numpys_bit_for_bit(seed: int) -> None:
+    """The degeneracy check's window moments (compiled) are numpy's to the bit, on box-world scans
+    (walls, corners, jumps) and on random clouds of every small size around the window's; so are
+    the lines, their normals and the information matrix built from them."""
+    grid, res = box_world()
+    rng = np.random.default_rng(seed)
+    pose = Pose2D(rng.uniform(2, 8), rng.uniform(1.5, 5), rng.uniform(-np.pi, np.pi))
+    clouds = [cast_scan(grid, res, pose, 360, noise=0.01, rng=rng).points()]
+    clouds += [rng.normal(0.0, 3.0, (n, 2)) for n in (7, 8, 9, 15, 64, 201)]
+    for pts in clouds:
+        for half in (1, 3):
+            got = kernels.window_moments(np.ascontiguousarray(pts), half)
+            for a, b in zip(got, window_moments_reference(pts, half), strict=True):
+                assert np.array_equal(a, b)
+            for a, b in zip(surface_lines(pts, half), surface_lines_reference(pts, half), strict=True):
+                assert np.array_equal(a, b)
+            theta = float(rng.uniform(-np.pi, np.pi))
+            info = translation_information(pts, theta, half)
+            assert np.array_equal(info, translation_information_reference(pts, theta, half))
+    assert surface_lines(clouds[0])[1].mean() > 0.5  # walls: most points are on a line

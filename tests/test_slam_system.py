@@ -8,6 +8,7 @@ import threading
 import numpy as np
 import pytest
 
+from nav.slam.pose_graph import EdgeSet
 from nav.slam.synthetic import LOOP_WAYPOINTS, box_world, cast_scan, drifting_odometry, loop_trajectory
 from nav.slam.system import GraphSlam, SlamOptions
 from nav.types import OccupancyGrid, Pose2D
@@ -150,3 +151,51 @@ def test_no_loop_closure_with_the_submaps_next_to_the_nodes_own(
     for lc in slam._loops:
         mine = nodes[lc.node].submaps
         assert not min(mine) - 1 <= lc.submap <= max(mine) + 1, (lc.node, mine, lc.submap)
+
+
+def _edges_reference(slam: GraphSlam, n: int, m: int) -> EdgeSet:
+    """The pose graph's edges built from scratch, one Python row at a time (what ``_edges`` did
+    before it cached the front-end rows)."""
+    o = slam.options
+    nodes, submaps = slam._nodes, slam._submaps
+    c_info = [1 / o.constraint_translation_sigma] * 2 + [1 / o.constraint_rotation_sigma]
+    o_info = [1 / o.odometry_translation_sigma] * 2 + [1 / o.odometry_rotation_sigma]
+    ii, jj, zz, ww, rb = [], [], [], [], []
+    for j in range(m):
+        for i in submaps[j].nodes:
+            if i < n:
+                ii.append(n + j), jj.append(i), ww.append(c_info), rb.append(False)
+                zz.append(nodes[i].local.relative_to(submaps[j].local_pose).as_array())
+    for i in range(1, n):
+        ii.append(i - 1), jj.append(i), ww.append(o_info), rb.append(False)
+        zz.append(nodes[i].local.relative_to(nodes[i - 1].local).as_array())
+    for lc in slam._loops:
+        ii.append(n + lc.submap), jj.append(lc.node), ww.append(c_info), rb.append(True)
+        zz.append(lc.relative.as_array())
+    return EdgeSet(np.array(ii), np.array(jj), np.array(zz), np.array(ww), np.array(rb))
+
+
+def test_pose_graph_edges_are_cached_and_identical(
+    drift_run: tuple[GraphSlam, np.ndarray, np.ndarray], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The front-end edges' measurements never change once their nodes exist: after the run each is
+    computed once, and the edge set equals the one built row by row, bit for bit (at the final
+    graph and at a prefix of it, as a back end that ran before the last nodes sees it)."""
+    slam = drift_run[0]
+    n, m = slam.num_nodes, len(slam._submaps)
+    sm_nodes = [list(s.nodes) for s in slam._submaps]
+    for nn in (n, n // 2):
+        mm = sum(1 for nodes in sm_nodes if nodes and nodes[0] < nn)
+        got = slam._edges(slam._nodes, slam._submaps, sm_nodes, nn, mm, slam._loops)
+        want = _edges_reference(slam, nn, mm)
+        for a, b in zip(
+            (got.i, got.j, got.z, got.sqrt_info, got.robust),
+            (want.i, want.j, want.z, want.sqrt_info, want.robust),
+            strict=True,
+        ):
+            assert a.dtype == b.dtype and a.shape == b.shape and np.array_equal(a, b)
+    calls = []
+    relative_to = Pose2D.relative_to
+    monkeypatch.setattr(Pose2D, "relative_to", lambda a, b: calls.append(1) or relative_to(a, b))
+    slam._edges(slam._nodes, slam._submaps, sm_nodes, n, m, slam._loops)
+    assert not calls  # nothing recomputed

@@ -260,34 +260,76 @@ def refine_pose_reference(
     return pose, float(field.interpolate(world).mean())
 
 
-def translation_information(pts: np.ndarray, theta: float, half_window: int = 3) -> np.ndarray:
-    """(2, 2) mean of ``n n^T`` over the scan's surface normals, rotated by ``theta`` (the match's
-    heading): how well the scan's geometry pins the position in each direction (the point-to-line
-    Hessian of ICP, as used to detect degeneracy by Zhang et al. 2016). Along a corridor or an aisle
-    whose ends are out of range every normal is across it, so the information along it is ~0.
-
-    ``pts`` (N, 2) are in beam order; each point's normal is that of the line through it and its
-    ``half_window`` neighbours on each side, kept only where those points are collinear (a wall,
-    not a corner or a jump between two surfaces). The scan's geometry is used, not the map's field:
-    a field built from noisy scans ripples along a straight wall, which looks like information
-    along it that is not there."""
+def surface_lines(pts: np.ndarray, half_window: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Per point of a scan in beam order: the direction (rad, in the points' frame) of the line
+    through it and its ``half_window`` neighbours on each side, and whether those points are
+    collinear (a wall, not a corner or a jump between two surfaces; False at the scan's ends).
+    Compiled (:func:`nav.slam.kernels.surface_lines`, bit-identical to the numpy version
+    :func:`surface_lines_reference`)."""
     n = pts.shape[0]
     if n < 2 * half_window + 1:
-        return np.zeros((2, 2))
+        return np.zeros(n), np.zeros(n, dtype=bool)
+    return kernels.surface_lines(np.ascontiguousarray(pts, dtype=np.float64), half_window)
+
+
+def surface_lines_reference(pts: np.ndarray, half_window: int = 3) -> tuple[np.ndarray, np.ndarray]:
+    """Pure-numpy reference of :func:`surface_lines` (the tests compare the two)."""
+    n = pts.shape[0]
+    if n < 2 * half_window + 1:
+        return np.zeros(n), np.zeros(n, dtype=bool)
+    return _lines_from_moments(*window_moments_reference(pts, half_window), half_window)
+
+
+def window_moments_reference(pts: np.ndarray, half_window: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Pure-numpy reference of :func:`nav.slam.kernels.window_moments`."""
+    n = pts.shape[0]
     idx = np.arange(n)[:, None] + np.arange(-half_window, half_window + 1)[None, :]
     idx = np.clip(idx, 0, n - 1)
     win = pts[idx]  # (N, W, 2)
     d = win - win.mean(axis=1, keepdims=True)
     cxx, cyy = (d[..., 0] ** 2).mean(axis=1), (d[..., 1] ** 2).mean(axis=1)
     cxy = (d[..., 0] * d[..., 1]).mean(axis=1)
-    along = 0.5 * np.arctan2(2 * cxy, cxx - cyy) + theta  # the line's direction, rotated
+    return cxx, cyy, cxy
+
+
+def _lines_from_moments(
+    cxx: np.ndarray, cyy: np.ndarray, cxy: np.ndarray, half_window: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`surface_lines` from the windows' second moments."""
+    n = cxx.shape[0]
+    along = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
     spread = np.hypot(0.5 * (cxx - cyy), cxy)
     lam_hi, lam_lo = 0.5 * (cxx + cyy) + spread, 0.5 * (cxx + cyy) - spread
     line = (lam_lo <= 0.05 * lam_hi) & (lam_hi > 0)
     line[:half_window] = line[n - half_window :] = False
+    return along, line
+
+
+def translation_information(pts: np.ndarray, theta: float, half_window: int = 3) -> np.ndarray:
+    """(2, 2) mean of ``n n^T`` over the scan's surface normals, rotated by ``theta`` (the match's
+    heading): how well the scan's geometry pins the position in each direction (the point-to-line
+    Hessian of ICP, as used to detect degeneracy by Zhang et al. 2016). Along a corridor or an aisle
+    whose ends are out of range every normal is across it, so the information along it is ~0.
+
+    ``pts`` (N, 2) are in beam order; each point's normal is that of its :func:`surface_lines`
+    line, where there is one. The scan's geometry is used, not the map's field:
+    a field built from noisy scans ripples along a straight wall, which looks like information
+    along it that is not there."""
+    along, line = surface_lines(pts, half_window)
     if not line.any():
         return np.zeros((2, 2))
-    nx, ny = -np.sin(along[line]), np.cos(along[line])
+    nx, ny = kernels.surface_normals(along, line, theta)  # the lines' directions, rotated
+    return np.array([[nx @ nx, nx @ ny], [nx @ ny, ny @ ny]]) / pts.shape[0]
+
+
+def translation_information_reference(pts: np.ndarray, theta: float, half_window: int = 3) -> np.ndarray:
+    """Pure-numpy reference of :func:`translation_information` (the tests compare the two)."""
+    n = pts.shape[0]
+    along, line = surface_lines_reference(pts, half_window)
+    if not line.any():
+        return np.zeros((2, 2))
+    along = along[line] + theta  # the line's direction, rotated
+    nx, ny = -np.sin(along), np.cos(along)
     return np.array([[nx @ nx, nx @ ny], [nx @ ny, ny @ ny]]) / n
 
 

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import math
 import threading
+from bisect import bisect_left
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 from typing import Literal
 
@@ -292,6 +294,22 @@ def _compose_arr(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return np.column_stack((a[:, 0] + c * b[:, 0] - s * b[:, 1], a[:, 1] + s * b[:, 0] + c * b[:, 1], th))
 
 
+class _RowCache:
+    """Rows ``f(0), f(1), ...`` (poses as (3,) arrays) computed once each and kept stacked: the
+    pose graph's front-end edge measurements, which never change once their nodes exist."""
+
+    def __init__(self) -> None:
+        self._stack = np.zeros((0, 3))
+
+    def rows(self, count: int, f: Callable[[int], Pose2D]) -> np.ndarray:
+        """(count, 3): the first ``count`` rows, computing the missing ones with ``f``."""
+        have = len(self._stack)
+        if count > have:
+            new = np.array([f(k).as_array() for k in range(have, count)]).reshape(-1, 3)
+            self._stack = np.vstack((self._stack, new))
+        return self._stack[:count]
+
+
 class GraphSlam:
     """Graph SLAM over submaps. Deterministic for a given input sequence."""
 
@@ -322,6 +340,10 @@ class GraphSlam:
         self._submap_global: list[np.ndarray] = []
         self._loops: list[LoopCandidate] = []
         self._field_lru: dict[int, None] = {}  # finished submaps holding a field, oldest first
+        # front-end edges' measurements, computed once (back end): per submap, its nodes' poses in
+        # it; per node i >= 1, its pose relative to node i - 1
+        self._sm_rows: dict[int, _RowCache] = {}
+        self._chain = _RowCache()
         # per scan (every add_scan call): stamp, reference node, pose relative to that node
         self._scan_stamp: list[float] = []
         self._scan_node: list[int] = []
@@ -800,34 +822,34 @@ class GraphSlam:
         loops: list[LoopCandidate],
     ) -> EdgeSet:
         """Graph edges: node-in-submap (front end), consecutive nodes, and robust loop closures.
-        Variables are the n nodes followed by the m submaps."""
+        Variables are the n nodes followed by the m submaps. The front-end edges' measurements
+        depend only on front-end poses, which never change, so each is computed once and cached
+        (back-end thread only): rebuilding them every optimization cost O(n) Python per call."""
         o = self.options
-        ii, jj, zz, ww, rb = [], [], [], [], []
         c_info = [1 / o.constraint_translation_sigma] * 2 + [1 / o.constraint_rotation_sigma]
         o_info = [1 / o.odometry_translation_sigma] * 2 + [1 / o.odometry_rotation_sigma]
+        sm_i, sm_j, sm_z = [], [], []
         for j in range(m):
-            sm = submaps[j]
-            for i in sm_nodes[j]:
-                if i >= n:
-                    continue
-                ii.append(n + j)
-                jj.append(i)
-                zz.append(nodes[i].local.relative_to(sm.local_pose).as_array())
-                ww.append(c_info)
-                rb.append(False)
-        for i in range(1, n):
-            ii.append(i - 1)
-            jj.append(i)
-            zz.append(nodes[i].local.relative_to(nodes[i - 1].local).as_array())
-            ww.append(o_info)
-            rb.append(False)
-        for lc in loops:
-            ii.append(n + lc.submap)
-            jj.append(lc.node)
-            zz.append(lc.relative.as_array())
-            ww.append(c_info)
-            rb.append(True)
-        return EdgeSet(np.array(ii), np.array(jj), np.array(zz), np.array(ww), np.array(rb))
+            rows = self._sm_rows.setdefault(j, _RowCache())
+            members = sm_nodes[j]
+            count = bisect_left(members, n)  # a submap's nodes are in increasing order
+            pose = submaps[j].local_pose
+            z = rows.rows(
+                count, lambda k, members=members, pose=pose: nodes[members[k]].local.relative_to(pose)
+            )
+            sm_i.append(np.full(count, n + j, dtype=np.int64))
+            sm_j.append(np.asarray(members[:count], dtype=np.int64))
+            sm_z.append(z)
+        chain = self._chain.rows(n - 1, lambda k: nodes[k + 1].local.relative_to(nodes[k].local))
+        k_sm = sum(len(a) for a in sm_i)
+        ii = np.concatenate(
+            (*sm_i, np.arange(n - 1), np.array([n + lc.submap for lc in loops], dtype=np.int64))
+        )
+        jj = np.concatenate((*sm_j, np.arange(1, n), np.array([lc.node for lc in loops], dtype=np.int64)))
+        zz = np.vstack((*sm_z, chain, np.array([lc.relative.as_array() for lc in loops]).reshape(-1, 3)))
+        ww = np.repeat(np.array([c_info, o_info, c_info]), [k_sm, n - 1, len(loops)], axis=0)
+        rb = np.concatenate((np.zeros(k_sm + n - 1, dtype=bool), np.ones(len(loops), dtype=bool)))
+        return EdgeSet(ii, jj, zz, ww, rb)
 
     # -- outputs ------------------------------------------------------------------------------------
     def map(self) -> OccupancyGrid:
