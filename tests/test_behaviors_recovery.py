@@ -189,10 +189,20 @@ def test_a_walker_on_the_path_makes_the_robot_wait_without_spending_the_budget()
     for _ in range(30):  # 3 s: stopped while the walker stays
         step(ctx, policy.command)
         assert policy.tick(ctx) is Status.RUNNING and policy.command.is_zero()
-    on_path[0] = False  # it stepped aside: the wait ends and navigation goes on
+    on_path[0] = False  # it stepped aside: once the path stays clear for clear_time (1 s)...
+    for _ in range(9):
+        step(ctx, policy.command)
+        assert policy.tick(ctx) is Status.RUNNING
+    on_path[0] = True  # (back for a scan: a walker turning drops out of tracking and back)
     step(ctx, policy.command)
-    assert policy.tick(ctx) is Status.SUCCEEDED
-    assert policy.walker_waited == pytest.approx(3.1, abs=1e-6)
+    assert policy.tick(ctx) is Status.RUNNING
+    on_path[0] = False
+    statuses = []
+    while not statuses or statuses[-1] is Status.RUNNING:
+        step(ctx, policy.command)
+        statuses.append(policy.tick(ctx))
+    assert statuses[-1] is Status.SUCCEEDED and len(statuses) in (10, 11)  # ...the wait ends
+    assert policy.walker_waited == pytest.approx(5.0, abs=0.11)
     # no walker at the next failure: the round robin from its first step, as before
     assert policy.on_failure(Trigger.CONTROLLER_FAILURE, ctx).name == "clear_local_costmap"
     assert policy.attempts == 1

@@ -48,23 +48,30 @@ class WaitForWalkerOptions:
     """Seconds after which the wait fails with the walker still on the path (the next failure then
     runs the recovery list), s."""
 
+    clear_time: float = 1.0
+    """Seconds the path must stay clear before the wait succeeds: a walker that turns or pauses
+    drops out of tracking (below ``PERSON_MIN_SPEED``) for a scan or two, s."""
+
     def __post_init__(self) -> None:
-        check_non_negative("wait_for_walker", max_wait=self.max_wait)
+        check_non_negative("wait_for_walker", max_wait=self.max_wait, clear_time=self.clear_time)
 
 
 class WaitForWalker(TimedBehavior):
     """Nav2's ``Wait``, ended by the walker rather than the clock: send zero velocity while
     ``ctx.walker_on_path()`` says a tracked walker stands on the path ahead; succeed once it has
-    left, fail after ``max_wait`` s (or at once without a walker predicate in the context)."""
+    been gone for ``clear_time`` s, fail after ``max_wait`` s (or at once without a walker
+    predicate in the context)."""
 
     name = "wait_for_walker"
 
     def __init__(self, options: WaitForWalkerOptions | None = None) -> None:
         self.options = options or WaitForWalkerOptions()
         super().__init__(self.options.max_wait)
+        self._seen_at = 0.0  # when a walker was last on the path
 
     def start(self, ctx: BehaviorContext) -> Status:
         self._begin(ctx)
+        self._seen_at = ctx.now
         if ctx.walker_on_path is None:
             return self._fail("wait_for_walker: no walker tracking in the context")
         return self.tick(ctx)
@@ -72,7 +79,9 @@ class WaitForWalker(TimedBehavior):
     def tick(self, ctx: BehaviorContext) -> Status:
         self._require_started()
         assert ctx.walker_on_path is not None
-        if not ctx.walker_on_path():
+        if ctx.walker_on_path():
+            self._seen_at = ctx.now
+        elif ctx.now - self._seen_at >= self.options.clear_time:
             return self._succeed()
         if self._timed_out(ctx):
             return self._fail(
