@@ -31,7 +31,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from nav.control import Controller
+from nav.control import Controller, reset_patience
 from nav.control.errors import ControllerError, NoValidControl, PatienceExceeded
 from nav.control.goal_checker import GoalChecker
 from nav.control.progress_checker import ProgressChecker
@@ -285,11 +285,26 @@ class Navigator:
             self._cancel_requested = True
 
     def resume(self) -> None:
-        """Leave STUCK after a recovery behaviour: reset progress tracking and replan."""
+        """Leave STUCK after a recovery behaviour: reset progress tracking and the controller's
+        failure count, and replan. Only the count: the controller keeps its critics' memories and
+        band (a full ``reset()`` made the robot dither between chair legs), but a count left at its
+        limit would raise ``PatienceExceeded`` again on the very next cycle, and four recoveries
+        ran in 0.3 s while a walker stood in a door (Nav2 retries with a fresh FollowPath)."""
         if self.state == NavState.STUCK:
             self._clear_stuck()
             self.progress_checker.reset()
+            reset_patience(self.controller)
             self._force_plan = "resume"
+
+    def path_ahead(self, distance: float) -> np.ndarray:
+        """(M, 2) points of the path from the one nearest the robot to ``distance`` m along it;
+        empty without a path."""
+        if self._path is None:
+            return np.zeros((0, 2))
+        s = self._path_s
+        i = self._nearest_index()
+        j = int(np.searchsorted(s, s[i] + distance, side="right"))
+        return self._path.poses[i : max(j, i + 1), :2].copy()
 
     def halt(self, reason: str, message: str) -> None:
         """Enter STUCK for a cause the navigator cannot see itself (localization lost, the safety
@@ -511,11 +526,7 @@ class Navigator:
         m of the path, in the global costmap or ``local``."""
         if self._path is None:
             return False
-        p, s = self._path.poses, self._path_s
-        i = self._nearest_index()
-        ahead_m = self.options.blocked_check_distance if distance is None else distance
-        j = int(np.searchsorted(s, s[i] + ahead_m, side="right"))
-        ahead = p[i : max(j, i + 1), :2]
+        ahead = self.path_ahead(self.options.blocked_check_distance if distance is None else distance)
         maps = [self._global] if local is None else [self._global, local]
         for cm in maps:
             rows, cols = cm.geometry.world_to_cell(ahead)

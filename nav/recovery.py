@@ -114,6 +114,28 @@ class RecoveryOptions:
     """Per-trigger lists (by :class:`Trigger` value) used instead of ``steps`` for that trigger."""
     enabled_triggers: tuple[str, ...] = tuple(t.value for t in Trigger)
     """Triggers that start recovery; any other failure aborts the goal at once."""
+    count_failed_starts: bool = False
+    """Whether a behaviour that fails on start (a spin or back-up refused because it is blocked:
+    it sent no command, the robot did not move) spends one of ``number_of_retries``. Nav2 counts
+    every attempt (True); navdeck's default moves on to the next step at once and counts only the
+    step that ran, so a walker in a door does not spend the budget on refused spins (apartment TEB
+    61: six recoveries in 8 s, two of them refused). If every step of the list fails on start, the
+    last one counts (the budget still ends)."""
+    walker_wait: float = 10.0
+    """When a tracked walker stands on the path ahead at a failure (``walker_wait_triggers``), stop
+    and wait up to this many seconds for it to leave (``wait_for_walker``, Nav2's ``Wait`` ended by
+    the walker) instead of running the next recovery; the wait does not spend the retry budget. A
+    wait that ends with the walker still there lets the next failure run the recovery list as
+    usual. 0: never wait for walkers."""
+    walker_wait_total: float = 60.0
+    """Seconds of walker waits allowed per goal (bounds the waits when walkers keep coming back)."""
+    walker_wait_triggers: tuple[str, ...] = (
+        Trigger.CONTROLLER_FAILURE.value,
+        Trigger.NO_PROGRESS.value,
+        Trigger.PLANNER_FAILURE.value,
+        Trigger.SAFETY_STOP.value,
+    )
+    """Triggers for which a walker on the path means waiting (a lost robot does not wait)."""
 
     def __post_init__(self) -> None:
         if not isinstance(self.number_of_retries, int) or self.number_of_retries < 0:
@@ -136,6 +158,17 @@ class RecoveryOptions:
             if t not in known_triggers:
                 raise RecoveryConfigError(f"recovery.enabled_triggers[{i}]: unknown trigger {t!r}")
         object.__setattr__(self, "enabled_triggers", enabled)
+        for name in ("walker_wait", "walker_wait_total"):
+            v = getattr(self, name)
+            if not (isinstance(v, int | float) and math.isfinite(v) and v >= 0):
+                raise RecoveryConfigError(
+                    f"recovery.{name} must be a non-negative number of seconds, got {v!r}"
+                )
+        waits = tuple(t.value if isinstance(t, Trigger) else t for t in self.walker_wait_triggers)
+        for i, t in enumerate(waits):
+            if t not in known_triggers:
+                raise RecoveryConfigError(f"recovery.walker_wait_triggers[{i}]: unknown trigger {t!r}")
+        object.__setattr__(self, "walker_wait_triggers", waits)
 
     @staticmethod
     def _validate_list(raw: Sequence[Any], where: str) -> tuple[RecoveryStep, ...]:
@@ -158,7 +191,16 @@ class RecoveryOptions:
         """From parsed TOML/JSON: ``{"steps": ["spin", {"behavior": "wait", "wait_duration": 2}],
         "number_of_retries": 6, "trigger_steps": {...}, "enabled_triggers": [...]}``."""
         d = dict(data)
-        known = {"steps", "number_of_retries", "trigger_steps", "enabled_triggers"}
+        known = {
+            "steps",
+            "number_of_retries",
+            "trigger_steps",
+            "enabled_triggers",
+            "count_failed_starts",
+            "walker_wait",
+            "walker_wait_total",
+            "walker_wait_triggers",
+        }
         bad = sorted(set(d) - known)
         if bad:
             raise RecoveryConfigError(f"recovery.{bad[0]}: unknown field; known: {', '.join(sorted(known))}")
@@ -173,6 +215,11 @@ class RecoveryOptions:
             kwargs["trigger_steps"] = dict(d["trigger_steps"])
         if "enabled_triggers" in d:
             kwargs["enabled_triggers"] = tuple(d["enabled_triggers"])
+        for name in ("count_failed_starts", "walker_wait", "walker_wait_total"):
+            if name in d:
+                kwargs[name] = d[name]
+        if "walker_wait_triggers" in d:
+            kwargs["walker_wait_triggers"] = tuple(d["walker_wait_triggers"])
         return cls(**kwargs)
 
 
@@ -209,6 +256,9 @@ class RecoveryPolicy:
         self._cursor: dict[str, int] = {}
         self._exhausted_reported = False  # the navigator asks every tick until it gives up
         self.last_status: Status = Status.SUCCEEDED
+        self.walker_waited = 0.0  # s of walker waits in this goal
+        self._walker_waiting = False  # the active behaviour is a walker wait
+        self._walker_outlasted = False  # the last walker wait ended with the walker still there
 
     # ------------------------------------------------------------------ state
     @property
@@ -231,6 +281,8 @@ class RecoveryPolicy:
         self.active_trigger = None
         self._cursor.clear()
         self._exhausted_reported = False
+        self.walker_waited = 0.0
+        self._walker_waiting = self._walker_outlasted = False
 
     def on_goal_reached(self) -> None:
         """Navigation succeeded: like Nav2's RecoveryNode, the retry count starts over."""
@@ -247,13 +299,20 @@ class RecoveryPolicy:
     # ------------------------------------------------------------------ protocol
     def on_failure(self, trigger: Trigger, ctx: BehaviorContext, detail: str = "") -> Behavior | None:
         """Navigation failed for ``trigger``: start the next recovery and return it, or return None
-        when the goal must be aborted (budget spent, or trigger not enabled). A behaviour that fails
-        immediately on start is reported and counts as an attempt; the next call moves on."""
+        when the goal must be aborted (budget spent, or trigger not enabled).
+
+        A tracked walker on the path ahead first makes the robot wait for it (``walker_wait``, not
+        counted). A behaviour that fails on start is reported; unless ``count_failed_starts``, it
+        spends nothing and the next step of the list starts at once (see that option)."""
         if trigger.value not in self.options.enabled_triggers:
             self._emit(
                 RecoveryEvent("rejected", ctx.now, trigger.value, reason="trigger not enabled", detail=detail)
             )
             return None
+        if self._should_wait_for_walker(trigger, ctx):
+            return self._start(
+                make_behavior("wait_for_walker", {"max_wait": self._walker_wait_left}), trigger, ctx, detail
+            )
         if self.exhausted:
             if not self._exhausted_reported:  # one event per spent budget, not one per tick
                 self._exhausted_reported = True
@@ -269,14 +328,38 @@ class RecoveryPolicy:
                 )
             self.active = None
             return None
+        self._walker_outlasted = False
         steps = self.steps_for(trigger)
         key = trigger.value if trigger.value in self.options.trigger_steps else "*"
-        i = self._cursor.get(key, 0)
-        self._cursor[key] = (i + 1) % len(steps)
-        step = steps[i]
-        self.attempts += 1
-        behavior = make_behavior(step.behavior, step.params)
+        for tried in range(1, len(steps) + 1):
+            i = self._cursor.get(key, 0)
+            self._cursor[key] = (i + 1) % len(steps)
+            self.attempts += 1
+            behavior = self._start(make_behavior(steps[i].behavior, steps[i].params), trigger, ctx, detail)
+            refused = self.active is None and self.last_status is Status.FAILED
+            if not refused or self.options.count_failed_starts or tried == len(steps):
+                return behavior
+            self.attempts -= 1  # it sent no command: no recovery ran, try the next step now
+        raise AssertionError("unreachable: the loop returns on its last step")
+
+    @property
+    def _walker_wait_left(self) -> float:
+        return min(self.options.walker_wait, self.options.walker_wait_total - self.walker_waited)
+
+    def _should_wait_for_walker(self, trigger: Trigger, ctx: BehaviorContext) -> bool:
+        """A walker stands on the path, and neither this goal's walker waits nor the last wait (the
+        walker stayed) say to recover instead."""
+        return (
+            trigger.value in self.options.walker_wait_triggers
+            and self._walker_wait_left > 0.0
+            and not self._walker_outlasted
+            and ctx.walker_on_path is not None
+            and ctx.walker_on_path()
+        )
+
+    def _start(self, behavior: Behavior, trigger: Trigger, ctx: BehaviorContext, detail: str) -> Behavior:
         self.active, self.active_trigger = behavior, trigger
+        self._walker_waiting = behavior.name == "wait_for_walker"
         self._emit(
             RecoveryEvent(
                 "attempt",
@@ -317,6 +400,11 @@ class RecoveryPolicy:
             )
         )
         self.last_status = status
+        if self._walker_waiting:
+            started = getattr(self.active, "started_at", None)
+            self.walker_waited += ctx.now - started if started is not None else 0.0
+            self._walker_outlasted = status is Status.FAILED
+            self._walker_waiting = False
         self.active = None
 
     def run_to_end(

@@ -77,3 +77,15 @@ class WalkerTracker:
             self.centres, self.velocities = centre[walking], v[walking]
         self._clusters, self._stamp = centre[person], stamp
         return vel
+
+
+def near_points(centres: np.ndarray, points: np.ndarray, radius: float) -> np.ndarray:
+    """Which of the walkers' ``centres`` (W, 2) lie within ``radius`` of any of ``points`` (M, 2):
+    a walker on a stretch of path (the points a path's, the radius the robot's circumscribed
+    radius plus a walker's body and a margin)."""
+    c = np.asarray(centres, dtype=float).reshape(-1, 2)
+    p = np.asarray(points, dtype=float).reshape(-1, 2)
+    if not (len(c) and len(p)):
+        return np.zeros(len(c), dtype=bool)
+    d = np.hypot(c[:, None, 0] - p[None, :, 0], c[:, None, 1] - p[None, :, 1])
+    return (d <= radius).any(axis=1)

@@ -120,13 +120,19 @@ def test_safety_stop_waits_then_backs_away() -> None:
     assert ctx.pose.x == pytest.approx(-0.30, abs=0.02)
 
 
-def test_failed_behaviour_is_reported_and_counted() -> None:
-    opts = RecoveryOptions(steps=(RecoveryStep("back_up", {"backup_dist": 0.3}), RecoveryStep("wait")))
-    policy = RecoveryPolicy(opts)
-    ctx, _ = make_ctx()
+def _wall_behind(ctx: BehaviorContext) -> None:
     costs = ctx.costmap.costs.copy()
     costs[:, : costs.shape[1] // 2 - 3] = 254  # wall right behind the robot
     ctx.costmap = type(ctx.costmap)(ctx.costmap.geometry, costs)
+
+
+def test_failed_behaviour_is_reported_and_counted_the_nav2_way() -> None:
+    opts = RecoveryOptions(
+        steps=(RecoveryStep("back_up", {"backup_dist": 0.3}), RecoveryStep("wait")), count_failed_starts=True
+    )
+    policy = RecoveryPolicy(opts)
+    ctx, _ = make_ctx()
+    _wall_behind(ctx)
     b = policy.on_failure(Trigger.NO_PROGRESS, ctx)
     assert b is not None and policy.active is None  # refused at start
     res = policy.events[-1]
@@ -134,6 +140,97 @@ def test_failed_behaviour_is_reported_and_counted() -> None:
     assert policy.attempts == 1
     assert policy.command.is_zero()
     assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "wait"
+
+
+def test_a_refused_behaviour_spends_nothing_and_the_next_step_starts_at_once() -> None:
+    # apartment TEB 61: a walker in the door, spin and back-up refused at start, each spent one
+    # of the six retries without moving the robot
+    opts = RecoveryOptions(
+        steps=(RecoveryStep("back_up", {"backup_dist": 0.3}), RecoveryStep("wait", {"wait_duration": 1.0})),
+        number_of_retries=2,
+    )
+    policy = RecoveryPolicy(opts)
+    ctx, _ = make_ctx()
+    _wall_behind(ctx)
+    b = policy.on_failure(Trigger.NO_PROGRESS, ctx)
+    assert b is not None and b.name == "wait" and policy.active is b  # the wait runs now
+    kinds = [(e.kind, e.behavior, e.status) for e in policy.events]
+    assert kinds == [("attempt", "back_up", ""), ("result", "back_up", "failed"), ("attempt", "wait", "")]
+    assert policy.attempts == 1 and policy.retries_left == 1
+    assert policy.run_to_end(ctx, step) is Status.SUCCEEDED
+    # a step that ran counts: the refused back-up again, then the wait spends the last retry
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "wait"
+    assert policy.exhausted
+
+
+def test_when_every_step_is_refused_the_last_one_counts() -> None:
+    opts = RecoveryOptions(steps=(RecoveryStep("back_up", {"backup_dist": 0.3}),), number_of_retries=2)
+    policy = RecoveryPolicy(opts)
+    ctx, _ = make_ctx()
+    _wall_behind(ctx)
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx) is not None and policy.active is None
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx) is not None
+    assert policy.exhausted and policy.on_failure(Trigger.NO_PROGRESS, ctx) is None
+
+
+def _walker_ctx() -> tuple[BehaviorContext, list[bool]]:
+    ctx, _ = make_ctx()
+    on_path = [True]
+    ctx.walker_on_path = lambda: on_path[0]
+    return ctx, on_path
+
+
+def test_a_walker_on_the_path_makes_the_robot_wait_without_spending_the_budget() -> None:
+    policy = RecoveryPolicy(RecoveryOptions(walker_wait=10.0))
+    ctx, on_path = _walker_ctx()
+    b = policy.on_failure(Trigger.CONTROLLER_FAILURE, ctx, "PatienceExceeded")
+    assert b is not None and b.name == "wait_for_walker"
+    assert policy.attempts == 0 and policy.retries_left == 6
+    for _ in range(30):  # 3 s: stopped while the walker stays
+        step(ctx, policy.command)
+        assert policy.tick(ctx) is Status.RUNNING and policy.command.is_zero()
+    on_path[0] = False  # it stepped aside: once the path stays clear for clear_time (1 s)...
+    for _ in range(9):
+        step(ctx, policy.command)
+        assert policy.tick(ctx) is Status.RUNNING
+    on_path[0] = True  # (back for a scan: a walker turning drops out of tracking and back)
+    step(ctx, policy.command)
+    assert policy.tick(ctx) is Status.RUNNING
+    on_path[0] = False
+    statuses = []
+    while not statuses or statuses[-1] is Status.RUNNING:
+        step(ctx, policy.command)
+        statuses.append(policy.tick(ctx))
+    assert statuses[-1] is Status.SUCCEEDED and len(statuses) in (10, 11)  # ...the wait ends
+    assert policy.walker_waited == pytest.approx(5.0, abs=0.11)
+    # no walker at the next failure: the round robin from its first step, as before
+    assert policy.on_failure(Trigger.CONTROLLER_FAILURE, ctx).name == "clear_local_costmap"
+    assert policy.attempts == 1
+
+
+def test_a_walker_that_stays_gets_the_recovery_list_after_the_wait() -> None:
+    policy = RecoveryPolicy(RecoveryOptions(walker_wait=2.0))
+    ctx, _ = _walker_ctx()
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "wait_for_walker"
+    assert policy.run_to_end(ctx, step) is Status.FAILED
+    assert 2.0 <= ctx.now <= 2.2 and "still on the path" in policy.events[-1].reason
+    # the walker outlasted the wait: recover as without walkers, then waiting is allowed again
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "clear_local_costmap"
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "wait_for_walker"
+
+
+def test_walker_waits_are_bounded_per_goal_and_not_for_a_lost_robot() -> None:
+    policy = RecoveryPolicy(RecoveryOptions(walker_wait=2.0, walker_wait_total=3.0))
+    ctx, _ = _walker_ctx()
+    for _ in range(2):
+        assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name == "wait_for_walker"
+        policy.run_to_end(ctx, step)
+        policy.on_failure(Trigger.NO_PROGRESS, ctx)  # the recovery after an outlasted wait
+        policy.run_to_end(ctx, step)
+    assert policy.walker_waited == pytest.approx(3.0, abs=0.11)  # the second wait got the rest
+    assert policy.on_failure(Trigger.NO_PROGRESS, ctx).name != "wait_for_walker"
+    policy.reset()  # a new goal: waits allowed again, but a lost robot does not wait
+    assert policy.on_failure(Trigger.LOCALIZATION_DIVERGENCE, ctx).name == "spin_until_matched"
 
 
 def test_disabled_trigger_is_rejected() -> None:
@@ -192,6 +289,9 @@ def test_from_mapping_accepts_names_and_tables() -> None:
         ({"trigger_steps": {"meteor": ["spin"]}}, r"trigger_steps\.meteor"),
         ({"trigger_steps": {"safety_stop": ["warp"]}}, r"trigger_steps\.safety_stop\[0\]"),
         ({"enabled_triggers": ["planner_failure", "bored"]}, r"enabled_triggers\[1\]"),
+        ({"walker_wait": -1.0}, r"recovery\.walker_wait "),
+        ({"walker_wait_total": float("nan")}, r"recovery\.walker_wait_total"),
+        ({"walker_wait_triggers": ["no_progress", "rain"]}, r"walker_wait_triggers\[1\]"),
     ],
 )
 def test_bad_config_is_refused_naming_the_field(data: dict, field: str) -> None:

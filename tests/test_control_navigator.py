@@ -11,6 +11,8 @@ import pytest
 from test_control_world import SKID_FOOTPRINT, GridPlanner, box, inflate, integrate, l_corridor, room
 
 from nav.control import DwaController, DwaOptions, GoalChecker, ProgressChecker
+from nav.control.teb import TebController
+from nav.control.teb_options import TebOptions
 from nav.navigator import Navigator, NavigatorOptions, NavState, NavTick, PlanRequest
 from nav.planning.errors import GoalOccupied
 from nav.types import Costmap, Path, Pose2D, Twist2D
@@ -220,6 +222,45 @@ def test_controller_patience_exceeded_is_stuck_with_its_name() -> None:
     assert ticks[first].feedback.stuck_reason == "PatienceExceeded"
     assert all(t.cmd.is_zero() for t in ticks)
     assert ticks[first - 1].feedback.activity.startswith("no safe trajectory")
+
+
+@pytest.mark.parametrize(("name", "pocket"), [("dwa", 5), ("teb", 3)])
+def test_after_a_recovery_the_controller_gets_its_patience_again(name: str, pocket: int) -> None:
+    # apartment TEB 61: the failure count stayed at its limit through resume(), so the very next
+    # cycle raised PatienceExceeded again (four recoveries in 0.3 s while a walker stood in a door)
+    occ = room()
+    occ[55:66, 15:26] = True
+    lo = 58 + (5 - pocket) // 2
+    occ[lo : lo + pocket, lo - 40 : lo - 40 + pocket] = False  # a pocket the robot cannot move in
+    cm = inflate(occ, inscribed=0.1)
+    ctl = (
+        DwaController(DwaOptions(footprint=SKID_FOOTPRINT, vx_samples=8, vtheta_samples=11))
+        if name == "dwa"
+        else TebController(TebOptions(footprint=SKID_FOOTPRINT))
+    )
+    nav = Navigator(
+        None,
+        ctl,
+        GoalChecker(),
+        ProgressChecker(),
+        plan_fn=lambda costmap, start, goal: Path(np.array([[start.x, start.y, 0.0], [goal.x, goal.y, 0.0]])),
+    )
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    pose = Pose2D(1.025, 3.025, 0.0)
+    ticks, _ = run(nav, pose, cm, 2.0)
+    assert ticks[-1].state == NavState.STUCK and ticks[-1].feedback.stuck_reason == "PatienceExceeded"
+    stuck_at = (len(ticks) - 1) * DT
+    nav.resume()  # a recovery ran (here it could not free the robot)
+    ticks2, _ = run(nav, pose, cm, 2.0, start=stuck_at + 0.5)
+    states = [t.state for t in ticks2]
+    assert states[0] == NavState.FOLLOWING  # not PatienceExceeded at once
+
+    def failing(ts: list[NavTick]) -> int:
+        return sum(t.feedback.activity.startswith("no safe trajectory") for t in ts)
+
+    # as many failing cycles again before the next PatienceExceeded as after the fresh goal
+    assert NavState.STUCK in states
+    assert failing(ticks) >= 2 and failing(ticks2[: states.index(NavState.STUCK)]) >= failing(ticks)
 
 
 def test_set_goals_validates() -> None:

@@ -72,3 +72,49 @@ def test_a_safety_layer_that_keeps_stopping_the_robot_starts_the_safety_stop_rec
         assert math.isfinite(started[0]["t"]) and started[0]["t"] >= 5.0
     finally:
         stack.session.close()
+
+
+def test_a_walker_on_the_path_at_a_failure_makes_the_robot_wait_then_go() -> None:
+    # Greenhouse aisle (1.2 m wide): a walker paces the aisle 1.5-2 m ahead of the robot, then walks
+    # on out of it. The navigation stops for a cause of its own (halt: the controller stood still)
+    # with the walker on the path: the robot waits for it, stopped, without spending the retry
+    # budget, and drives on once the walker has left (before: clear_local_costmap, then the rest
+    # of the round robin, with the walker still there).
+    world = World.stock("greenhouse")
+    start = Pose2D(4.0, 6.2, 0.0)
+    stack = build_sim_stack(world.grid, world, start, localization="truth", controller="dwa", seed=0)
+    s, nav = stack.session, stack.navigation
+    events: list[dict] = []
+    add_event = s.add_event
+
+    def record(kind: str, /, **data) -> None:
+        if kind == "recovery" and "behavior" in data:
+            events.append(data)
+        add_event(kind, **data)
+
+    try:
+        s.add_event = record
+        far_end = [[10.8, 9.6], [10.8, 9.0]] * 20  # it stays out of the way there
+        stack.driver.people.add_loop([[5.6, 6.2], [6.2, 6.2]] * 3 + [[10.8, 6.2], *far_end], speed=0.5)
+        stack.localization.set_initial_pose(start)
+        nav.set_goals([Pose2D(11.0, 6.2, 0.0)])
+        s.run_for(1.0)  # a path, and the walker tracked
+        assert nav.walker_on_path(s.clock.now())
+        nav.navigator.halt("Stalled", "the controller stood still")
+        t0 = s.clock.now()
+        commands_while_waiting = []
+        while s.clock.now() - t0 < 60.0 and (nav.active or nav.last_outcome is None):
+            s.run_for(s.period)
+            if len(events) == 1:
+                commands_while_waiting.append(s.last_command)
+        wait, done = events[0], events[1]
+        assert (wait["kind"], wait["behavior"], wait["attempt"]) == ("attempt", "wait_for_walker", 0)
+        assert (done["kind"], done["behavior"], done["status"]) == ("result", "wait_for_walker", "succeeded")
+        assert 2.0 < done["t"] - wait["t"] < 10.0  # until the walker left, not the full wait
+        braking = round(0.5 / s.period)  # the base decelerates from its speed at the halt
+        moving = [c for c in commands_while_waiting[braking:] if c is not None and not c.is_zero()]
+        assert not moving, moving[:3]  # stopped while waiting
+        assert nav.last_outcome is not None and nav.last_outcome["kind"] == "reached"
+        assert nav.recovery.policy.attempts == 0  # the budget was not touched
+    finally:
+        s.close()

@@ -62,7 +62,7 @@ from nav.types import (
     Twist2D,
     wrap_angle,
 )
-from nav.walkers import MAX_SCAN_GAP, WalkerTracker
+from nav.walkers import MAX_SCAN_GAP, PERSON_RADIUS, WalkerTracker, near_points
 from nav.warmup import warm_up_navigation
 
 if TYPE_CHECKING:
@@ -203,6 +203,7 @@ class BehaviorRecovery:
             clear_local_costmap=feature.clear_local_costmap,
             clear_global_costmap=feature.clear_global_costmap,
             reinitialize_localization=feature.localization.reinitialize,
+            walker_on_path=lambda: feature.walker_on_path(now),
         )
 
     def reset(self) -> None:
@@ -293,6 +294,10 @@ class NavigationOptions:
     initial pose (the filter corrects a few cm per update while tracking)."""
     jump_angle: float = 0.5
     """The same for the heading (rad)."""
+    walker_path_margin: float = 0.3
+    """Metres beyond touching (robot's circumscribed radius + a walker's body) at which a tracked
+    walker counts as on the path when navigation fails (then the robot waits for it, see
+    ``RecoveryOptions.walker_wait``)."""
     safety_stop_timeout: float = 5.0
     """Seconds the safety layer may hold the robot (every command toward an obstacle stopped)
     while navigating before the ``safety_stop`` recovery list runs; 0: never (then the progress
@@ -887,6 +892,21 @@ class Navigation:
             teb.set_walkers(w.centres + w.velocities * age, w.velocities)
         else:
             teb.set_walkers(np.zeros((0, 2)), np.zeros((0, 2)))
+
+    def walker_on_path(self, now: float) -> bool:
+        """Whether a tracked walker (moved on to ``now``) is within the robot's circumscribed
+        radius + a walker's body + ``walker_path_margin`` of the robot or of the path's next
+        ``blocked_check_distance`` m: the failure is the walker's, and waiting for it is the
+        recovery (``RecoveryOptions.walker_wait``)."""
+        w = self.walkers
+        age = now - w.stamp
+        if not (0.0 <= age <= MAX_SCAN_GAP) or len(w.centres) == 0:
+            return False
+        pose = self.session.pose
+        ahead = self.navigator.path_ahead(self.navigator.options.blocked_check_distance)
+        points = np.vstack(([pose.x, pose.y], ahead))
+        reach = self.profile.circumscribed_radius + PERSON_RADIUS + self.options.walker_path_margin
+        return bool(near_points(w.centres + w.velocities * age, points, reach).any())
 
     def _blame_localization(self) -> None:
         """Stuck with the footprint on a wall of the map itself: no robot can stand there, so the

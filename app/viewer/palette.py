@@ -141,6 +141,7 @@ BEHAVIOR_COLORS: dict[str, tuple[int, int, int]] = {
     "spin_until_matched": (230, 60, 200),
     "relocalize": (255, 60, 120),
     "wait": (255, 200, 0),
+    "wait_for_walker": (255, 225, 120),  # a wait ended by the walker leaving the path
     "back_up": (255, 120, 0),
     "drive_on_heading": (180, 220, 40),
 }

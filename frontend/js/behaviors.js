@@ -11,6 +11,7 @@ export const BEHAVIOR_COLORS = {
   spin_until_matched: [230, 60, 200],
   relocalize: [255, 60, 120],
   wait: [255, 200, 0],
+  wait_for_walker: [255, 225, 120],
   back_up: [255, 120, 0],
   drive_on_heading: [180, 220, 40],
 };

@@ -27,7 +27,7 @@ from nav.behaviors.spin import (
     SpinUntilMatched,
     SpinUntilMatchedOptions,
 )
-from nav.behaviors.wait import Wait, WaitOptions
+from nav.behaviors.wait import Wait, WaitForWalker, WaitForWalkerOptions, WaitOptions
 
 #: name -> (options class, fixed option values, constructor)
 REGISTRY: dict[str, tuple[type, dict[str, Any], Callable[[Any], Behavior]]] = {
@@ -38,6 +38,7 @@ REGISTRY: dict[str, tuple[type, dict[str, Any], Callable[[Any], Behavior]]] = {
     "spin_until_matched": (SpinUntilMatchedOptions, {}, SpinUntilMatched),
     "relocalize": (RelocalizeOptions, {}, Relocalize),
     "wait": (WaitOptions, {}, Wait),
+    "wait_for_walker": (WaitForWalkerOptions, {}, WaitForWalker),
     "back_up": (BackUpOptions, {}, BackUp),
     "drive_on_heading": (DriveOnHeadingOptions, {}, DriveOnHeading),
 }
@@ -99,6 +100,8 @@ __all__ = [
     "SpinUntilMatchedOptions",
     "Status",
     "Wait",
+    "WaitForWalker",
+    "WaitForWalkerOptions",
     "WaitOptions",
     "behavior_options",
     "collision_threshold",

@@ -98,6 +98,8 @@ class BehaviorContext:
     """Clears the global costmap's obstacle layer."""
     reinitialize_localization: Callable[[], None] | None = None
     """Restarts localization over the whole map (AMCL ``reinitialize_global_localization``)."""
+    walker_on_path: Callable[[], bool] | None = None
+    """Whether a tracked walker stands on the path ahead now (for ``wait_for_walker``)."""
 
 
 class Behavior(Protocol):

@@ -20,6 +20,14 @@ class Controller(Protocol):
     def reset(self) -> None: ...
 
 
+def reset_patience(controller: Controller) -> None:
+    """Start ``controller``'s failure count (``failure_tolerance``) over, if it keeps one: DWA and TEB
+    do (``reset_patience``); a controller without it has no patience to reset."""
+    reset = getattr(controller, "reset_patience", None)
+    if callable(reset):
+        reset()
+
+
 __all__ = [
     "DWB_CRITICS",
     "FOX_CRITICS",
@@ -35,4 +43,5 @@ __all__ = [
     "PatienceExceeded",
     "ProgressChecker",
     "ProgressCheckerOptions",
+    "reset_patience",
 ]

@@ -142,6 +142,13 @@ class DwaController:
         for c in self.critics:
             c.reset()
 
+    def reset_patience(self) -> None:
+        """Start the failure count over (``failure_tolerance`` afresh) and keep everything else: after
+        a recovery the navigator retries the same goal (Nav2 sends a fresh FollowPath), and a count
+        left at its limit raised ``PatienceExceeded`` again on the very next cycle. The critics'
+        memories (oscillation, ...) stay: clearing them let the robot dither between chair legs."""
+        self._fail_cycles = 0
+
     @property
     def goal(self) -> Pose2D | None:
         return None if self._path is None else Pose2D.from_array(self._path[-1])

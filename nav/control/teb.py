@@ -319,6 +319,10 @@ class TebController:
         self._fail_cycles = 0
         self.last_debug = None
 
+    def reset_patience(self) -> None:
+        """Start the failure count over and keep the band (see ``DwaController.reset_patience``)."""
+        self._fail_cycles = 0
+
     @property
     def goal(self) -> Pose2D | None:
         return None if self._path is None else Pose2D.from_array(self._path[-1])
