@@ -41,14 +41,20 @@ class MappingDrive:
 
 
 def build(world_name: str, start: Pose2D, seed: int = 0) -> MappingDrive:
+    from maps.stock import stock_world_path
+    from robot.sim import World
+
+    return build_in(World.from_yaml(stock_world_path(world_name)), start, seed)
+
+
+def build_in(world: object, start: Pose2D, seed: int = 0) -> MappingDrive:
+    """A mapping drive in a given simulated ``World`` (a generated one, ``robot.sim.worldgen``)."""
     from app.features.mapping import Mapping
     from app.session import Session
-    from maps.stock import stock_world_path
     from robot.clock import VirtualClock
     from robot.profiles import load_profile
-    from robot.sim import SimDriver, World
+    from robot.sim import SimDriver
 
-    world = World.from_yaml(stock_world_path(world_name))
     clock = VirtualClock()
     driver = SimDriver(world, load_profile("skid4"), clock, seed=seed, start_pose=start)
     session = Session(driver, clock=clock, grid=world.grid, start_pose=start)

@@ -69,11 +69,11 @@ class SlamOptions:
     it stops at the first cell a submap already holds as occupied (the fuller active submap first),
     and a return-less beam next to a returning one (a dropout on a wall) stops a cell short of its
     neighbour's return (issue 16, no ghost free space)."""
-    grazing_ray_margin: float = 0.05
-    """A return's ray clears no cell it passed within this distance (m) of the surface it hit,
-    except near the return itself: the last ``margin * cot(angle between ray and surface)`` of the
-    ray clears nothing, 0 for a head-on return, metres for one that grazed a wall (the surface's
-    direction from the scan's neighbouring returns, :func:`grazing_shortening`). A beam that runs
+    grazing_ray_margin: float = 0.025
+    """A return's ray clears no cell where it ran within this distance (m, half a cell) of the
+    surface it hit: its last ``margin / sin(angle between ray and surface)`` clears nothing, half a
+    cell for a head-on return, metres for one that grazed a wall (the surface's direction from the
+    scan's neighbouring returns, :func:`grazing_shortening`). A beam that runs
     nearly parallel to a face before it meets it passes through the face's boundary cells (those
     straddling the face, on a lattice not aligned with it) where its return does not land, and many
     such beams outvote the few returns that land in each: the face was cleared (the greenhouse's
@@ -295,22 +295,17 @@ def _dropout_reach(r: np.ndarray, hit: np.ndarray, resolution: float) -> np.ndar
 
 def grazing_shortening(pts: np.ndarray, margin: float) -> np.ndarray:
     """Per return (``pts`` (N, 2) in the laser frame, beam order): how far short of it its ray
-    stops clearing: ``margin * cos(a) / sin(a)``, with ``a`` the angle between the beam and the
-    surface it hit (the :func:`surface_lines` line through its neighbours), at most the whole ray.
-    That is how far along the surface, back from the return, the beam ran within ``margin`` of it:
-    through cells the surface may cross that the return itself does not mark. A head-on return
-    (``a`` = 90 deg), or one with no line through its neighbours (a corner, a post, clutter), keeps
-    its whole ray."""
+    stops clearing, ``margin / sin(a)`` with ``a`` the angle between the beam and the surface it
+    hit (the :func:`surface_lines` line through its neighbours; 90 deg, head-on, where there is no
+    line: a corner, a post, clutter), at most the whole ray: over that stretch the beam ran within
+    ``margin`` of the surface, through cells the surface may cross."""
     if pts.shape[0] == 0 or margin <= 0.0:
         return np.zeros(pts.shape[0])
     r = np.hypot(pts[:, 0], pts[:, 1])
     along, line = surface_lines(pts)
-    c, s = np.cos(along), np.sin(along)
-    rr = np.maximum(r, 1e-9)
-    sin_a = np.abs(pts[:, 0] * s - pts[:, 1] * c) / rr
-    cos_a = np.abs(pts[:, 0] * c + pts[:, 1] * s) / rr
-    run = margin * cos_a / np.maximum(sin_a, margin / np.maximum(r, margin))
-    return np.where(line, np.minimum(run, r), 0.0)
+    sin_a = np.abs(pts[:, 0] * np.sin(along) - pts[:, 1] * np.cos(along)) / np.maximum(r, 1e-9)
+    sin_a = np.where(line, sin_a, 1.0)
+    return np.minimum(margin / np.maximum(sin_a, margin / np.maximum(r, margin)), r)
 
 
 def _close(a: Pose2D, b: Pose2D, resolution: float) -> bool:
