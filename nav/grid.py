@@ -103,7 +103,7 @@ def _insert_kernel(
     """:meth:`LogOddsGrid.insert_rays_reference` compiled: the same samples (``trace_rays``), the
     same once-per-cell update and the same stop rule for return-less rays, but only the cells the
     rays cross are touched (no pass over the whole grid); samples of a ray with a return within
-    ``shorten[i]`` of its end clear nothing. Returns (cells that became occupied,
+    ``shorten[i]`` of its end do not clear cells the grid holds occupied. Returns (cells that became occupied,
     count that became free, per miss ray the fraction kept)."""
     mark = np.zeros(flat.size, dtype=np.int8)
     touched = np.empty(64, dtype=np.int64)
@@ -134,11 +134,11 @@ def _insert_kernel(
         stop = n
         for k in range(n):
             f = k / n
-            if hit[i] and (1.0 - f) * length < shorten[i]:
-                break  # samples come in order along the ray: none further clears
             c = math.floor((x0 + dx * f - ox) / res)
             r = math.floor((y0 + dy * f - oy) / res)
             idx = r * width + c
+            if hit[i] and flat[idx] > 0.0 and (1.0 - f) * length < shorten[i]:
+                continue
             if not hit[i] and (mark[idx] == 2 or flat[idx] > 0.0):
                 stop = k
                 break
@@ -278,10 +278,11 @@ class LogOddsGrid:
     ) -> InsertResult:
         """Integrate one scan's rays ``origins[i] -> ends[i]`` (grid frame). ``hit[i]`` marks the end
         as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
-        ``shorten[i]`` (m, default 0): ray ``i``, when it has a return, clears nothing within that
-        distance of its end (a beam that met its surface at a grazing angle ran along it, inside the
-        cells that hold it: :func:`nav.slam.system.grazing_shortening`). Compiled
-        (:func:`_insert_kernel`); semantics as :meth:`insert_rays_reference`."""
+        ``shorten[i]`` (m, default 0): ray ``i``, when it has a return, does not clear a cell the grid
+        holds occupied within that distance of its end (a beam that met its surface at a grazing
+        angle ran along it, through the cells that hold it:
+        :func:`nav.slam.system.grazing_shortening`). Compiled (:func:`_insert_kernel`); semantics as
+        :meth:`insert_rays_reference`."""
         rays = self._grown_for(origins, ends, hit)
         if rays is None:
             return InsertResult(np.zeros(0, np.int64), 0, False, np.ones(0))
@@ -331,9 +332,10 @@ class LogOddsGrid:
         n = np.maximum(np.ceil(length / (self.resolution * opt.step_fraction)).astype(np.int64), 1)
         k = np.arange(ray.size) - np.repeat(np.cumsum(n) - n, n)
         near_end = hit[ray] & ((1.0 - k / n[ray]) * length[ray] < _shortening(shorten, ends.shape[0])[ray])
-        pts, ray = pts[~near_end], ray[~near_end]
         fr, fc = self.cells(pts)
         free_idx = fr * w + fc
+        keep = ~near_end | (self.logodds.reshape(-1)[free_idx] <= 0.0)
+        free_idx, ray = free_idx[keep], ray[keep]
         hr, hc = self.cells(ends[hit])
         hit_idx = hr * w + hc
         flat = self.logodds.reshape(-1)

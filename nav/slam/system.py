@@ -70,10 +70,11 @@ class SlamOptions:
     and a return-less beam next to a returning one (a dropout on a wall) stops a cell short of its
     neighbour's return (issue 16, no ghost free space)."""
     grazing_ray_margin: float = 0.025
-    """A return's ray clears no cell where it ran within this distance (m, half a cell) of the
-    surface it hit: its last ``margin / sin(angle between ray and surface)`` clears nothing, half a
-    cell for a head-on return, metres for one that grazed a wall (the surface's direction from the
-    scan's neighbouring returns, :func:`grazing_shortening`). A beam that runs
+    """A return's ray does not clear a cell the submap holds occupied where it ran within this
+    distance (m, half a cell) of the surface it hit: over its last ``margin / sin(angle between ray
+    and surface)``, half a cell for a head-on return, metres for one that grazed a wall (the
+    surface's direction from the scan's neighbouring returns, :func:`grazing_shortening`); cells
+    not (yet) occupied are cleared as before. A beam that runs
     nearly parallel to a face before it meets it passes through the face's boundary cells (those
     straddling the face, on a lattice not aligned with it) where its return does not land, and many
     such beams outvote the few returns that land in each: the face was cleared (the greenhouse's
