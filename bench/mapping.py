@@ -41,14 +41,20 @@ class MappingDrive:
 
 
 def build(world_name: str, start: Pose2D, seed: int = 0) -> MappingDrive:
+    from maps.stock import stock_world_path
+    from robot.sim import World
+
+    return build_in(World.from_yaml(stock_world_path(world_name)), start, seed)
+
+
+def build_in(world: object, start: Pose2D, seed: int = 0) -> MappingDrive:
+    """A mapping drive in a given simulated ``World`` (a generated one, ``robot.sim.worldgen``)."""
     from app.features.mapping import Mapping
     from app.session import Session
-    from maps.stock import stock_world_path
     from robot.clock import VirtualClock
     from robot.profiles import load_profile
-    from robot.sim import SimDriver, World
+    from robot.sim import SimDriver
 
-    world = World.from_yaml(stock_world_path(world_name))
     clock = VirtualClock()
     driver = SimDriver(world, load_profile("skid4"), clock, seed=seed, start_pose=start)
     session = Session(driver, clock=clock, grid=world.grid, start_pose=start)
@@ -58,19 +64,29 @@ def build(world_name: str, start: Pose2D, seed: int = 0) -> MappingDrive:
 
 
 def teleop_loop(
-    drive: MappingDrive, waypoints: Sequence[tuple[float, float]], timeout: float = 600.0
-) -> None:
+    drive: MappingDrive,
+    waypoints: Sequence[tuple[float, float]],
+    timeout: float = 600.0,
+    give_up_after: float = math.inf,
+) -> int:
     """An operator driving through ``waypoints`` with the keyboard: steer towards the next one (from
-    what the operator sees, the true pose) and send a teleop command every tick."""
+    what the operator sees, the true pose) and send a teleop command every tick. A waypoint not
+    reached within ``give_up_after`` seconds is skipped (an operator moving on from a spot the robot
+    cannot get to); returns how many were skipped."""
     s, drv = drive.session, drive.driver
     lim = s.profile.limits
     t0 = s.clock.now()
+    skipped = 0
     for wx, wy in waypoints:
+        t_leg = s.clock.now()
         while s.clock.now() - t0 < timeout:
             p = drv.truth_pose
             dx, dy = wx - p.x, wy - p.y
             dist = math.hypot(dx, dy)
             if dist < 0.15:
+                break
+            if s.clock.now() - t_leg > give_up_after:
+                skipped += 1
                 break
             err = math.remainder(math.atan2(dy, dx) - p.theta, math.tau)
             wz = float(np.clip(2.0 * err, -lim.max_vel_theta, lim.max_vel_theta))
@@ -82,6 +98,7 @@ def teleop_loop(
             raise TimeoutError(f"did not reach waypoint ({wx}, {wy}) in {timeout} s")
     s.set_teleop(Twist2D(), "bench")
     s.run_for(1.0)
+    return skipped
 
 
 def seen_wall_cells(drive: MappingDrive, step: int = 5) -> np.ndarray:

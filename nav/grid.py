@@ -93,6 +93,7 @@ def _insert_kernel(
     origins: np.ndarray,
     ends: np.ndarray,
     hit: np.ndarray,
+    shorten: np.ndarray,
     step: float,
     l_occ: np.float32,
     l_free: np.float32,
@@ -101,7 +102,8 @@ def _insert_kernel(
 ) -> tuple[np.ndarray, int, np.ndarray]:
     """:meth:`LogOddsGrid.insert_rays_reference` compiled: the same samples (``trace_rays``), the
     same once-per-cell update and the same stop rule for return-less rays, but only the cells the
-    rays cross are touched (no pass over the whole grid). Returns (cells that became occupied,
+    rays cross are touched (no pass over the whole grid); samples of a ray with a return within
+    ``shorten[i]`` of its end do not clear cells the grid holds occupied. Returns (cells that became occupied,
     count that became free, per miss ray the fraction kept)."""
     mark = np.zeros(flat.size, dtype=np.int8)
     touched = np.empty(64, dtype=np.int64)
@@ -127,13 +129,16 @@ def _insert_kernel(
     for i in range(m):
         x0, y0 = origins[i, 0], origins[i, 1]
         dx, dy = ends[i, 0] - x0, ends[i, 1] - y0
-        n = max(math.ceil(math.hypot(dx, dy) / step), 1)
+        length = math.hypot(dx, dy)
+        n = max(math.ceil(length / step), 1)
         stop = n
         for k in range(n):
             f = k / n
             c = math.floor((x0 + dx * f - ox) / res)
             r = math.floor((y0 + dy * f - oy) / res)
             idx = r * width + c
+            if hit[i] and flat[idx] > 0.0 and (1.0 - f) * length < shorten[i]:
+                continue
             if not hit[i] and (mark[idx] == 2 or flat[idx] > 0.0):
                 stop = k
                 break
@@ -162,6 +167,16 @@ def _insert_kernel(
         elif before and not after:
             n_free += 1
     return np.sort(occupied[:n_occ]), n_free, reach
+
+
+def _shortening(shorten: np.ndarray | None, m: int) -> np.ndarray:
+    """Per ray, the distance short of its end where it stops clearing (zeros when not given)."""
+    if shorten is None:
+        return np.zeros(m)
+    out = np.ascontiguousarray(shorten, dtype=np.float64).reshape(-1)
+    if out.shape[0] != m:
+        raise ValueError(f"shorten has {out.shape[0]} values for {m} rays")
+    return out
 
 
 @dataclass(frozen=True)
@@ -258,10 +273,16 @@ class LogOddsGrid:
         self.ensure_contains(np.vstack((origins, ends)))
         return origins, ends, np.asarray(hit, dtype=bool), old_shape
 
-    def insert_rays(self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray) -> InsertResult:
+    def insert_rays(
+        self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray, shorten: np.ndarray | None = None
+    ) -> InsertResult:
         """Integrate one scan's rays ``origins[i] -> ends[i]`` (grid frame). ``hit[i]`` marks the end
         as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
-        Compiled (:func:`_insert_kernel`); semantics as :meth:`insert_rays_reference`."""
+        ``shorten[i]`` (m, default 0): ray ``i``, when it has a return, does not clear a cell the grid
+        holds occupied within that distance of its end (a beam that met its surface at a grazing
+        angle ran along it, through the cells that hold it:
+        :func:`nav.slam.system.grazing_shortening`). Compiled (:func:`_insert_kernel`); semantics as
+        :meth:`insert_rays_reference`."""
         rays = self._grown_for(origins, ends, hit)
         if rays is None:
             return InsertResult(np.zeros(0, np.int64), 0, False, np.ones(0))
@@ -277,6 +298,7 @@ class LogOddsGrid:
             np.ascontiguousarray(origins),
             np.ascontiguousarray(ends),
             np.ascontiguousarray(hit),
+            _shortening(shorten, ends.shape[0]),
             self.resolution * opt.step_fraction,
             np.float32(opt.l_occ),
             np.float32(opt.l_free),
@@ -285,7 +307,9 @@ class LogOddsGrid:
         )
         return InsertResult(occupied, n_free, self.shape != old_shape, reach)
 
-    def insert_rays_reference(self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray) -> InsertResult:
+    def insert_rays_reference(
+        self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray, shorten: np.ndarray | None = None
+    ) -> InsertResult:
         """Pure-numpy reference of :meth:`insert_rays` (the tests compare the two).
 
         Each cell is updated once: hit cells by ``l_occ``, other traversed cells by ``l_free``.
@@ -303,8 +327,15 @@ class LogOddsGrid:
         h, w = self.shape
         opt = self.options
         pts, ray = trace_rays(origins, ends, self.resolution * opt.step_fraction)
+        d = ends - origins
+        length = np.hypot(d[:, 0], d[:, 1])
+        n = np.maximum(np.ceil(length / (self.resolution * opt.step_fraction)).astype(np.int64), 1)
+        k = np.arange(ray.size) - np.repeat(np.cumsum(n) - n, n)
+        near_end = hit[ray] & ((1.0 - k / n[ray]) * length[ray] < _shortening(shorten, ends.shape[0])[ray])
         fr, fc = self.cells(pts)
         free_idx = fr * w + fc
+        keep = ~near_end | (self.logodds.reshape(-1)[free_idx] <= 0.0)
+        free_idx, ray = free_idx[keep], ray[keep]
         hr, hc = self.cells(ends[hit])
         hit_idx = hr * w + hc
         flat = self.logodds.reshape(-1)
@@ -340,16 +371,24 @@ class LogOddsGrid:
         return free_idx[keep], (first / np.maximum(counts, 1))[miss]
 
     def insert_scan(
-        self, sensor_pose: Pose2D, points: np.ndarray, misses: np.ndarray | None = None
+        self,
+        sensor_pose: Pose2D,
+        points: np.ndarray,
+        misses: np.ndarray | None = None,
+        shorten: np.ndarray | None = None,
     ) -> InsertResult:
         """Integrate one scan: ``points`` (N, 2) returns and optional ``misses`` (M, 2) no-return
-        ray ends, both in the sensor frame whose pose in this grid's frame is ``sensor_pose``."""
+        ray ends, both in the sensor frame whose pose in this grid's frame is ``sensor_pose``;
+        ``shorten`` (N,): per return, how far short of it its ray stops clearing (see
+        :meth:`insert_rays`)."""
         ends = sensor_pose.transform_points(points) if len(points) else np.zeros((0, 2))
         hit = np.ones(len(ends), dtype=bool)
+        if shorten is not None and misses is not None and len(misses):
+            shorten = np.concatenate((shorten, np.zeros(len(misses))))
         if misses is not None and len(misses):
             ends = np.vstack((ends, sensor_pose.transform_points(misses)))
             hit = np.concatenate((hit, np.zeros(len(misses), dtype=bool)))
-        return self.insert_rays(np.array([[sensor_pose.x, sensor_pose.y]]), ends, hit)
+        return self.insert_rays(np.array([[sensor_pose.x, sensor_pose.y]]), ends, hit, shorten)
 
     # -- views ------------------------------------------------------------------------------------
     def probability(self) -> np.ndarray:

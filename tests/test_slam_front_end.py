@@ -131,9 +131,12 @@ def test_newly_seen_surfaces_do_not_drag_the_match_back() -> None:
     # ahead (range limit, through doors) than the submap holds; those points have no counterpart
     # in the submap and the likelihood field pulled them onto the nearest mapped cell, always on
     # the side already seen, so every match lagged behind the robot. They are now left out.
-    fixed = _corridor_drift(SlamOptions())
-    dragged = _corridor_drift(SlamOptions(match_unobserved_points=True))
-    assert fixed < 0.04, fixed
+    assert _corridor_drift(SlamOptions()) < 0.04
+    # the drag on its own, without the grazing-ray rule (grazing_ray_margin), which keeps the walls
+    # ahead sharper and by itself takes the dragged drift from 0.047 to 0.027 m (0.020 -> 0.024 m
+    # with the points left out)
+    fixed = _corridor_drift(SlamOptions(grazing_ray_margin=0.0))
+    dragged = _corridor_drift(SlamOptions(match_unobserved_points=True, grazing_ray_margin=0.0))
     assert dragged > 1.5 * fixed, (dragged, fixed)
 
 

@@ -159,8 +159,10 @@ def test_slam_see_through_reads_the_evidence_not_the_surface_wins_render() -> No
     slam.run_backend()
     rate = slam_see_through_rate(slam, scans, 8.0, every=1)
     assert rate < 0.03  # between this run's 1.2 % and a fold's > 5 %: other CPUs may round otherwise
-    # same grid as the saved map, fewer occupied cells (no widened walls), a lower rate
+    # the saved map's grid (up to the one-cell rim the widened walls may add to its extent), fewer
+    # occupied cells (no widened walls), a lower rate
     evidence, shown = slam.evidence_map(), slam.map()
-    assert evidence.geometry == shown.geometry
+    e, s = evidence.geometry, shown.geometry
+    assert e.resolution == s.resolution and abs(e.width - s.width) <= 2 and abs(e.height - s.height) <= 2
     assert evidence.occupied_mask().sum() < shown.occupied_mask().sum()
     assert see_through_rate(shown, slam.trajectory(sensor=True)[:, 1:], scans, 8.0, every=1) > rate

@@ -27,6 +27,7 @@ from nav.slam.matcher import (
     window_moments_reference,
 )
 from nav.slam.synthetic import box_world, cast_scan
+from nav.slam.system import grazing_shortening
 from nav.types import Pose2D
 
 TRUTH = Pose2D(3.0, 2.0, 0.4)
@@ -130,10 +131,11 @@ def test_search_with_the_compiled_scores_finds_the_true_pose() -> None:
         assert score > 0.6
 
 
-@pytest.mark.parametrize("seed", [0, 1])
-def test_compiled_ray_insertion_equals_the_reference(seed: int) -> None:
+@pytest.mark.parametrize(("seed", "margin"), [(0, 0.0), (1, 0.0), (2, 0.025)])
+def test_compiled_ray_insertion_equals_the_reference(seed: int, margin: float) -> None:
     # several scans from different poses, with returns and return-less rays (which stop at
     # occupied cells), into two grids: one per implementation; every result must be identical
+    # (``margin``: the returns' rays are shortened where they grazed their surface)
     world, res = box_world()
     rng = np.random.default_rng(seed)
     fast = LogOddsGrid(LogOddsOptions(resolution=0.05))
@@ -146,8 +148,9 @@ def test_compiled_ray_insertion_equals_the_reference(seed: int) -> None:
         origin = np.array([[pose.x, pose.y]])
         ends = np.vstack((pose.transform_points(pts), pose.transform_points(misses)))
         hit = np.concatenate((np.ones(len(pts), bool), np.zeros(len(misses), bool)))
-        a = fast.insert_rays(origin, ends, hit)
-        b = ref.insert_rays_reference(origin, ends, hit)
+        shorten = np.concatenate((grazing_shortening(pts, margin), np.zeros(len(misses))))
+        a = fast.insert_rays(origin, ends, hit, shorten)
+        b = ref.insert_rays_reference(origin, ends, hit, shorten)
         assert np.array_equal(a.became_occupied, b.became_occupied)
         assert a.became_free == b.became_free and a.resized == b.resized
         assert np.array_equal(a.miss_reach, b.miss_reach)

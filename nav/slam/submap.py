@@ -33,14 +33,21 @@ class Submap:
         self._stale_free = 0
 
     def insert(
-        self, node: int, node_local: Pose2D, sensor: Pose2D, points: np.ndarray, misses: np.ndarray
+        self,
+        node: int,
+        node_local: Pose2D,
+        sensor: Pose2D,
+        points: np.ndarray,
+        misses: np.ndarray,
+        shorten: np.ndarray | None = None,
     ) -> np.ndarray:
         """Insert a scan taken at front-end pose ``node_local``; ``sensor`` is the laser in base_link
-        and ``points`` / ``misses`` are in the laser frame. Returns ``misses`` shortened to where
+        and ``points`` / ``misses`` are in the laser frame; ``shorten``: per point, how far short of
+        it its ray stops clearing (``LogOddsGrid.insert_rays``). Returns ``misses`` shortened to where
         they stopped at a surface this submap holds (``LogOddsGrid.insert_rays``), so the next
         submap, still nearly empty, does not clear past walls this one knows."""
         in_submap = node_local.relative_to(self.local_pose).compose(sensor)
-        change = self.grid.insert_scan(in_submap, points, misses)
+        change = self.grid.insert_scan(in_submap, points, misses, shorten)
         self.nodes.append(node)
         if self._field is not None:
             self._stale_free += change.became_free

@@ -36,6 +36,7 @@ from nav.slam.matcher import (
     SearchWindow,
     fuse_with_prediction,
     match_scan_with_fallback,
+    surface_lines,
     translation_information,
 )
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
@@ -68,6 +69,17 @@ class SlamOptions:
     it stops at the first cell a submap already holds as occupied (the fuller active submap first),
     and a return-less beam next to a returning one (a dropout on a wall) stops a cell short of its
     neighbour's return (issue 16, no ghost free space)."""
+    grazing_ray_margin: float = 0.025
+    """A return's ray does not clear a cell the submap holds occupied where it ran within this
+    distance (m, half a cell) of the surface it hit: over its last ``margin / sin(angle between ray
+    and surface)``, half a cell for a head-on return, metres for one that grazed a wall (the
+    surface's direction from the scan's neighbouring returns, :func:`grazing_shortening`); cells
+    not (yet) occupied are cleared as before. A beam that runs
+    nearly parallel to a face before it meets it passes through the face's boundary cells (those
+    straddling the face, on a lattice not aligned with it) where its return does not land, and many
+    such beams outvote the few returns that land in each: the face was cleared (the greenhouse's
+    plant-row faces seen down the aisles from the headlands; issue 16, no ghost free space).
+    0: clear up to every return."""
     minimum_travel_distance: float = 0.1
     """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
     minimum_travel_heading: float = math.radians(5.0)
@@ -282,6 +294,21 @@ def _dropout_reach(r: np.ndarray, hit: np.ndarray, resolution: float) -> np.ndar
     return np.where(np.isinf(r) & np.isfinite(reach), np.maximum(reach, 0.0), np.inf)
 
 
+def grazing_shortening(pts: np.ndarray, margin: float) -> np.ndarray:
+    """Per return (``pts`` (N, 2) in the laser frame, beam order): how far short of it its ray
+    stops clearing, ``margin / sin(a)`` with ``a`` the angle between the beam and the surface it
+    hit (the :func:`surface_lines` line through its neighbours; 90 deg, head-on, where there is no
+    line: a corner, a post, clutter), at most the whole ray: over that stretch the beam ran within
+    ``margin`` of the surface, through cells the surface may cross."""
+    if pts.shape[0] == 0 or margin <= 0.0:
+        return np.zeros(pts.shape[0])
+    r = np.hypot(pts[:, 0], pts[:, 1])
+    along, line = surface_lines(pts)
+    sin_a = np.abs(pts[:, 0] * np.sin(along) - pts[:, 1] * np.cos(along)) / np.maximum(r, 1e-9)
+    sin_a = np.where(line, sin_a, 1.0)
+    return np.minimum(margin / np.maximum(sin_a, margin / np.maximum(r, margin)), r)
+
+
 def _close(a: Pose2D, b: Pose2D, resolution: float) -> bool:
     """Within a cell and a degree of each other."""
     return a.distance_to(b) <= resolution and abs(a.relative_to(b).theta) <= math.radians(1.0)
@@ -440,9 +467,10 @@ class GraphSlam:
             sm = Submap(len(self._submaps), local, o.grid_options(), o.likelihood_sigma)
             self._submaps.append(sm)
             self._submap_global.append(self._correction.compose(local).as_array())
+        shorten = grazing_shortening(pts_laser, o.grazing_ray_margin)
         for sm in self._submaps[-2:]:  # the older, fuller submap first: it shortens the misses
             if not sm.finished:
-                misses = sm.insert(index, local, laser_pose, pts_laser, misses)
+                misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten)
                 node.submaps.append(sm.index)
                 if len(sm.nodes) >= 2 * o.submap_num_range_data:
                     sm.finished = True
