@@ -17,6 +17,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
@@ -24,6 +25,9 @@ from scipy import ndimage
 from bench.core import Benchmark, Figure
 from bench.mapping import MappingDrive, build, teleop_loop
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
+
+if TYPE_CHECKING:  # only for hints: the SLAM modules load their compiled kernels
+    from nav.slam.system import SlamOptions
 
 FREE_MAX = 25
 """Built-map values counted as free (map_saver's default ``free_thresh`` 0.25)."""
@@ -138,10 +142,14 @@ def ghost_report(
 
 
 def map_after_loop(
-    world_name: str, start: Pose2D, loop: Sequence[tuple[float, float]], seed: int = 0
+    world_name: str,
+    start: Pose2D,
+    loop: Sequence[tuple[float, float]],
+    seed: int = 0,
+    slam_options: SlamOptions | None = None,
 ) -> tuple[MappingDrive, OccupancyGrid]:
     """Map ``world_name`` along a teleop loop; the drive (closed) and the saved map."""
-    drive = build(world_name, start, seed=seed)
+    drive = build(world_name, start, seed=seed, slam_options=slam_options)
     try:
         drive.mapping.start()
         teleop_loop(drive, loop, timeout=1800.0)
@@ -151,11 +159,13 @@ def map_after_loop(
         drive.session.close()
 
 
-def measure(world_name: str, seed: int = 0) -> tuple[GhostReport, float]:
+def measure(
+    world_name: str, seed: int = 0, slam_options: SlamOptions | None = None
+) -> tuple[GhostReport, float]:
     """The ghost report after the world's full loop and the SLAM pose error (m) at its end: a map
     that is off by that much places free cells in walls however its rays were cast."""
     start, loop = FULL_LOOPS[world_name]
-    drive, grid = map_after_loop(world_name, start, loop, seed)
+    drive, grid = map_after_loop(world_name, start, loop, seed, slam_options)
     truth = drive.driver.truth_pose.relative_to(drive.start_truth)
     report = ghost_report(grid, drive.world.static_occupied, drive.world.geometry, drive.start_truth)
     return report, drive.session.pose.distance_to(truth)

@@ -14,12 +14,16 @@ import math
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy import ndimage
 
 from bench.core import Benchmark, Figure
 from nav.types import OccupancyGrid, Pose2D, Twist2D
+
+if TYPE_CHECKING:  # only for hints: the SLAM modules load their compiled kernels
+    from nav.slam.system import SlamOptions
 
 # A closed loop along the office corridor (y 9-11 m) and back, and one around the apartment's table.
 OFFICE_START = Pose2D(2.0, 10.0, 0.0)
@@ -40,14 +44,18 @@ class MappingDrive:
     truth: list[Pose2D]
 
 
-def build(world_name: str, start: Pose2D, seed: int = 0) -> MappingDrive:
+def build(
+    world_name: str, start: Pose2D, seed: int = 0, slam_options: SlamOptions | None = None
+) -> MappingDrive:
     from maps.stock import stock_world_path
     from robot.sim import World
 
-    return build_in(World.from_yaml(stock_world_path(world_name)), start, seed)
+    return build_in(World.from_yaml(stock_world_path(world_name)), start, seed, slam_options)
 
 
-def build_in(world: object, start: Pose2D, seed: int = 0) -> MappingDrive:
+def build_in(
+    world: object, start: Pose2D, seed: int = 0, slam_options: SlamOptions | None = None
+) -> MappingDrive:
     """A mapping drive in a given simulated ``World`` (a generated one, ``robot.sim.worldgen``)."""
     from app.features.mapping import Mapping
     from app.session import Session
@@ -58,7 +66,7 @@ def build_in(world: object, start: Pose2D, seed: int = 0) -> MappingDrive:
     clock = VirtualClock()
     driver = SimDriver(world, load_profile("skid4"), clock, seed=seed, start_pose=start)
     session = Session(driver, clock=clock, grid=world.grid, start_pose=start)
-    mapping = Mapping(session)
+    mapping = Mapping(session, slam_options=slam_options)
     session.add_stage(mapping)
     return MappingDrive(session, driver, world, mapping, driver.truth_pose, [])
 

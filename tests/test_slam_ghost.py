@@ -261,6 +261,10 @@ def test_surface_in_one_submap_wins_over_free_in_others_when_asked() -> None:
     assert values(False)[0] < 25
 
 
+GRAZING_RAY_MARGIN = 0.025
+"""The grazing-ray rule's measured setting (``SlamOptions.grazing_ray_margin``, off by default)."""
+
+
 def _grazing_scan(face: float, degrees: tuple[float, float] = (2.0, 14.0), n: int = 60) -> np.ndarray:
     """Returns on a face ``y = face`` (laser frame) from beams ``degrees`` above the x axis: the
     face seen along its length, as a plant row's face is seen down an aisle from the headland."""
@@ -269,7 +273,7 @@ def _grazing_scan(face: float, degrees: tuple[float, float] = (2.0, 14.0), n: in
     return np.column_stack((r * np.cos(a), r * np.sin(a)))
 
 
-@pytest.mark.parametrize("margin", [0.0, SlamOptions().grazing_ray_margin])
+@pytest.mark.parametrize("margin", [0.0, GRAZING_RAY_MARGIN])
 def test_grazing_rays_do_not_clear_a_face_cell_a_return_marked(margin: float) -> None:
     """The greenhouse's full loop (bench mapping.ghost): free cells on the plant rows' faces, seen
     only down the aisles from the headlands. The lattice straddles a face (here the cell from 0.60
@@ -295,7 +299,7 @@ def test_grazing_rule_still_clears_a_walker_seen_once() -> None:
     """A walker one scan saw (an occupied cell in the open) is cleared by later rays that pass
     through its place on their way to a wall: they are far from the surface they hit, so the
     grazing rule does not hold them back (the reason ``surface_wins_across_submaps`` is off)."""
-    opt = SlamOptions()
+    opt = SlamOptions(grazing_ray_margin=GRAZING_RAY_MARGIN)
     g = LogOddsGrid(LogOddsOptions(resolution=0.05, grow_margin=1.0))
     walker = np.array([[2.0, 0.0]])
     g.insert_scan(Pose2D(0.025, 0.025, 0.0), walker)

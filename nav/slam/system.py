@@ -69,17 +69,19 @@ class SlamOptions:
     it stops at the first cell a submap already holds as occupied (the fuller active submap first),
     and a return-less beam next to a returning one (a dropout on a wall) stops a cell short of its
     neighbour's return (issue 16, no ghost free space)."""
-    grazing_ray_margin: float = 0.025
-    """A return's ray does not clear a cell the submap holds occupied where it ran within this
-    distance (m, half a cell) of the surface it hit: over its last ``margin / sin(angle between ray
-    and surface)``, half a cell for a head-on return, metres for one that grazed a wall (the
-    surface's direction from the scan's neighbouring returns, :func:`grazing_shortening`); cells
-    not (yet) occupied are cleared as before. A beam that runs
-    nearly parallel to a face before it meets it passes through the face's boundary cells (those
-    straddling the face, on a lattice not aligned with it) where its return does not land, and many
-    such beams outvote the few returns that land in each: the face was cleared (the greenhouse's
-    plant-row faces seen down the aisles from the headlands; issue 16, no ghost free space).
-    0: clear up to every return."""
+    grazing_ray_margin: float = 0.0
+    """Off by default (0). When > 0 (0.025 m, half a cell, is the measured setting), a return's ray
+    does not clear a cell the submap holds occupied where it ran within this distance (m) of the
+    surface it hit: over its last ``margin / sin(angle between ray and surface)``, half a cell for a
+    head-on return, metres for one that grazed a wall (the surface's direction from the scan's
+    neighbouring returns, :func:`grazing_shortening`); cells not (yet) occupied are cleared as
+    before. A beam that runs nearly parallel to a face before it meets it passes through the face's
+    boundary cells (those straddling the face, on a lattice not aligned with it) where its return
+    does not land, and many such beams outvote the few returns that land in each: the face was
+    cleared (the greenhouse's plant-row faces seen down the aisles from the headlands; issue 16, no
+    ghost free space). Why off: at 0.025 the ghost bench's in-wall cells fell 8 / 62 / 51 -> 2 / 48
+    / 30 (apartment / office / greenhouse) but FR079 scored 0.0455 m instead of 0.0440 m (Intel
+    0.0340, ACES 0.0373; docs/benchmarks.md, stop 30), and the real logs decide."""
     minimum_travel_distance: float = 0.1
     """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
     minimum_travel_heading: float = math.radians(5.0)
