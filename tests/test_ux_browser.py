@@ -13,11 +13,13 @@ from html.parser import HTMLParser
 import httpx
 import numpy as np
 import pytest
+import viser
 from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
 from playwright.sync_api import TimeoutError as PlaywrightTimeout
 from test_dashboard_browser import LONG, visible_ground, wait_until
 
 from app.embedded import EmbeddedServer, serve_in_thread
+from app.viewer.tabs import tab_of_connection
 
 pytestmark = BROWSER_MARKS
 
@@ -72,6 +74,18 @@ def view_tab(page, timeout: float = LONG) -> str:
         state = page.evaluate(VIEW_STATE)
         raise AssertionError(f"3D view gave no tab token in {timeout / 1000:.0f} s: {state}") from exc
     return page.evaluate(TAB_OF_VIEW)
+
+
+def connection_tabs(server: viser.ViserServer) -> list[str | None]:
+    """The tab token of every open websocket connection to viser (connected or not yet a client)."""
+    conns = getattr(getattr(server, "_websock_server", None), "_live_connections", {})
+    return [tab_of_connection(server, cid) for cid in list(conns)]
+
+
+def client_tabs(viewer) -> list[str]:
+    """The tabs of the clients viser has counted as connected (after their first camera message)."""
+    with viewer.tabs.lock:
+        return [c.tab for c in viewer.tabs.clients.values()]
 
 
 def ground_click(page, server: EmbeddedServer) -> tuple[float, float]:
@@ -296,7 +310,14 @@ def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: Embedde
         # run its first script and once over 240 s to connect; alone under two busy loops it takes ~6 s.
         tab_b = view_tab(other, timeout=600_000)
         assert tab_a != tab_b
-        assert wait_until(other, lambda: tab_b in [c.tab for c in viewer.tabs.clients.values()], timeout=600)
+        # viser counts a client as connected only after its first camera message, which the view sends
+        # from its render loop: bring B's page to the front so it renders (A's page had the focus)
+        other.bring_to_front()
+        assert wait_until(other, lambda: tab_b in client_tabs(viewer), timeout=600), (
+            "B's view never became a viser client",
+            {"live connections' tabs": connection_tabs(viewer.server), "clients' tabs": client_tabs(viewer)},
+            other.evaluate(VIEW_STATE),
+        )
         box_b = other.frame_locator("#viewer").get_by_role("checkbox", name="Map", exact=True)
         box_b.wait_for(timeout=LONG)
         assert box_b.is_checked() and viewer.is_shown("/map", tab_b)
