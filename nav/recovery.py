@@ -27,6 +27,7 @@ from nav.behaviors import (
     BehaviorConfigError,
     BehaviorContext,
     Status,
+    WaitForWalker,
     behavior_options,
     make_behavior,
 )
@@ -257,7 +258,6 @@ class RecoveryPolicy:
         self._exhausted_reported = False  # the navigator asks every tick until it gives up
         self.last_status: Status = Status.SUCCEEDED
         self.walker_waited = 0.0  # s of walker waits in this goal
-        self._walker_waiting = False  # the active behaviour is a walker wait
         self._walker_outlasted = False  # the last walker wait ended with the walker still there
 
     # ------------------------------------------------------------------ state
@@ -282,7 +282,7 @@ class RecoveryPolicy:
         self._cursor.clear()
         self._exhausted_reported = False
         self.walker_waited = 0.0
-        self._walker_waiting = self._walker_outlasted = False
+        self._walker_outlasted = False
 
     def on_goal_reached(self) -> None:
         """Navigation succeeded: like Nav2's RecoveryNode, the retry count starts over."""
@@ -359,7 +359,6 @@ class RecoveryPolicy:
 
     def _start(self, behavior: Behavior, trigger: Trigger, ctx: BehaviorContext, detail: str) -> Behavior:
         self.active, self.active_trigger = behavior, trigger
-        self._walker_waiting = behavior.name == "wait_for_walker"
         self._emit(
             RecoveryEvent(
                 "attempt",
@@ -400,11 +399,10 @@ class RecoveryPolicy:
             )
         )
         self.last_status = status
-        if self._walker_waiting:
-            started = getattr(self.active, "started_at", None)
+        if isinstance(self.active, WaitForWalker):
+            started = self.active.started_at
             self.walker_waited += ctx.now - started if started is not None else 0.0
             self._walker_outlasted = status is Status.FAILED
-            self._walker_waiting = False
         self.active = None
 
     def run_to_end(
