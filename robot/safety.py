@@ -17,8 +17,9 @@ Three zones, as collision_monitor's polygons, all derived from the robot's footp
 - **approach**: the footprint is moved along the commanded twist (exact SE(2) arcs) every
   ``simulation_time_step`` (finer when turning would move a footprint point more than
   ``SWEEP_STEP`` between two poses: the swept footprint of a turn, not just its ends) up to
-  ``time_before_collision``; if readings would enter it at time
-  t_c, the twist is scaled by t_c / time_before_collision so that the collision is never nearer
+  ``time_before_collision``; if ``min_points`` readings would have entered it by time t_c
+  (counted over the area swept so far: a corner clipping a post or a person holds a sliver of its
+  returns at any one pose), the twist is scaled by t_c / time_before_collision so that the collision is never nearer
   than that horizon (collision_monitor's ``approach`` action). A reading already inside the
   footprint counts once the motion takes it ``DEEPEN_TOL`` deeper (the simulator's contact rule:
   leave, never press in).
@@ -459,9 +460,9 @@ class SafetyFilter:
         inside_now: np.ndarray,
         vel: np.ndarray,
     ) -> tuple[float | None, int]:
-        """First simulated time at which >= min_points readings fall inside the moved footprint
-        (walkers' readings move on at their predicted velocity ``vel``), and the index of one of
-        them. A reading already inside counts only once the motion takes it deeper than now by
+        """First simulated time by which >= min_points readings have fallen inside the moved
+        footprint (the area it swept since now; walkers' readings move on at their predicted velocity
+        ``vel``), and the index of one inside it then. A reading already inside counts only once the motion takes it deeper than now by
         more than ``DEEPEN_TOL``, the simulator's rule for a body in contact: a turn or a backing
         away that frees the footprint passes, one that presses a touching leg in does not."""
         o = self.options
@@ -503,7 +504,11 @@ class SafetyFilter:
                 inside = _inside(moved, self._a, self._e)
                 deeper = inside & (depth.reshape(inside.shape) > depth0[None, :] + DEEPEN_TOL)
             hit[:, was_in] = deeper
-        count = (hit * wc[None, :]).sum(axis=1)
+        # the readings the footprint has swept over so far, not those inside it at one pose: a corner
+        # clipping a person or a post overlaps it by a sliver holding one or two returns at any
+        # single pose, never min_points, yet the sweep passes through many of them
+        swept = np.logical_or.accumulate(hit, axis=0)
+        count = (swept * wc[None, :]).sum(axis=1)
         k = np.flatnonzero(count >= o.min_points)
         if k.size == 0:
             return None, -1
