@@ -19,10 +19,10 @@ Three zones, as collision_monitor's polygons, all derived from the robot's footp
   ``SWEEP_STEP`` between two poses: the swept footprint of a turn, not just its ends) up to
   ``time_before_collision``; if ``min_points`` readings would have entered it by time t_c
   (counted over the area swept so far: a corner clipping a post or a person holds a sliver of its
-  returns at any one pose), the twist is scaled by t_c / time_before_collision so that the collision is never nearer
-  than that horizon (collision_monitor's ``approach`` action). A reading already inside the
-  footprint counts once the motion takes it ``DEEPEN_TOL`` deeper (the simulator's contact rule:
-  leave, never press in).
+  returns at any one pose), the twist is scaled by t_c / time_before_collision so that the
+  collision is never nearer than that horizon (collision_monitor's ``approach`` action). A reading
+  already inside the footprint counts once the motion takes it ``DEEPEN_TOL`` deeper (the
+  simulator's contact rule: leave, never press in).
 
 Readings: the latest lidar scan (a frame often carries none: the lidar runs at 5.5-10 Hz, the loop
 at 20 Hz) moved into the current base frame by the filter's own output twists since the scan's stamp
@@ -462,9 +462,10 @@ class SafetyFilter:
     ) -> tuple[float | None, int]:
         """First simulated time by which >= min_points readings have fallen inside the moved
         footprint (the area it swept since now; walkers' readings move on at their predicted velocity
-        ``vel``), and the index of one inside it then. A reading already inside counts only once the motion takes it deeper than now by
-        more than ``DEEPEN_TOL``, the simulator's rule for a body in contact: a turn or a backing
-        away that frees the footprint passes, one that presses a touching leg in does not."""
+        ``vel``), and the index of one inside it then. A reading already inside counts only once
+        the motion takes it deeper than now by more than ``DEEPEN_TOL``, the simulator's rule for a
+        body in contact: a turn or a backing away that frees the footprint passes, one that presses
+        a touching leg in does not."""
         o = self.options
         speed = math.hypot(twist.vx, twist.vy)
         reach = self._reach_fp + speed * o.time_before_collision + 1e-6
