@@ -4,7 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
+from nav.slam.pose_graph import (
+    EdgeSet,
+    PoseGraphOptions,
+    _HessianPattern,
+    edge_errors,
+    normal_equations_reference,
+    optimize_pose_graph,
+)
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -107,3 +114,37 @@ def test_dcs_kernel_switches_a_false_closure_off() -> None:
     err_dcs = np.hypot(*(x_dcs[:, :2] - truth[:, :2]).T).max()
     assert err_dcs < 0.01 < err_huber
     assert w[-1] < 1e-3 and np.all(w[-3:-1] == 1.0)  # the good closures keep their full weight
+
+
+def _loop_graph(seed: int, n: int = 120, loops: int = 30) -> tuple[np.ndarray, EdgeSet]:
+    """A noisy circle with a chain and random loop edges (some robust), poses perturbed off it."""
+    rng = np.random.default_rng(seed)
+    truth = _circle(n)
+    i = np.arange(n - 1)
+    li = rng.integers(0, n - 10, loops)
+    lj = li + rng.integers(5, 10, loops)
+    ii, jj = np.concatenate((i, li)), np.concatenate((i + 1, lj))
+    z = _rel(truth[ii], truth[jj]) + rng.normal(0, [0.02, 0.02, 0.01], (len(ii), 3))
+    info = rng.uniform(10, 100, (len(ii), 3))
+    robust = np.concatenate((np.zeros(n - 1, bool), rng.random(loops) < 0.5))
+    return truth + rng.normal(0, [0.2, 0.2, 0.05], truth.shape), EdgeSet(ii, jj, z, info, robust)
+
+
+def test_assembled_normal_equations_equal_the_sparse_product() -> None:
+    for seed in range(3):
+        x, edges = _loop_graph(seed)
+        n = len(x)
+        w = np.where(edges.robust, np.random.default_rng(seed).uniform(0.2, 1.0, len(edges)), 1.0)
+        h_ref, g_ref = normal_equations_reference(x, edges, w, n, 3, 1e-6)
+        h, g = _HessianPattern(edges, n, 3).assemble(x, edges, w, 1e-6)
+        np.testing.assert_allclose(h.toarray(), h_ref.toarray(), rtol=1e-12, atol=1e-9)
+        np.testing.assert_allclose(g, g_ref, rtol=1e-12, atol=1e-12)
+
+
+def test_ldl_solver_agrees_with_superlu() -> None:
+    for seed in range(3):
+        x0, edges = _loop_graph(seed)
+        ldl, _ = optimize_pose_graph(x0, edges, options=PoseGraphOptions(solver="ldl"))
+        ref, _ = optimize_pose_graph(x0, edges, options=PoseGraphOptions(solver="superlu"))
+        assert np.abs(x0 - ref).max() > 0.1  # the optimization moved the poses
+        np.testing.assert_allclose(ldl, ref, atol=1e-9)

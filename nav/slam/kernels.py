@@ -615,3 +615,53 @@ def surface_normals(along: np.ndarray, line: np.ndarray, theta: float) -> tuple[
             ny[k] = np.cos(a)
             k += 1
     return nx, ny
+
+
+@njit(cache=True, nogil=True)
+def accumulate_normal_equations(
+    poses: np.ndarray,
+    ei: np.ndarray,
+    ej: np.ndarray,
+    scale: np.ndarray,
+    r: np.ndarray,
+    pos: np.ndarray,
+    data: np.ndarray,
+    g: np.ndarray,
+) -> None:
+    """Pose graph (:mod:`nav.slam.pose_graph`): adds each edge's ``J^T J`` blocks into the CSC
+    ``data`` of H at ``pos`` (E, 4, 9: the edge's ii, ij, ji, jj blocks, row-major) and ``-J^T r``
+    into ``g``. ``scale`` (E, 3) is ``sqrt_info * w``, ``r`` (E, 3) the scaled errors. Reference:
+    ``pose_graph.normal_equations_reference`` (the sparse product ``J^T J``)."""
+    ja = np.zeros((3, 3))
+    jb = np.zeros((3, 3))
+    for e in range(ei.shape[0]):
+        i, j = ei[e], ej[e]
+        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        dx, dy = poses[j, 0] - poses[i, 0], poses[j, 1] - poses[i, 1]
+        q0, q1, q2 = scale[e, 0], scale[e, 1], scale[e, 2]
+        ja[0, 0], ja[0, 1], ja[0, 2] = -c * q0, -s * q0, (-s * dx + c * dy) * q0
+        ja[1, 0], ja[1, 1], ja[1, 2] = s * q1, -c * q1, (-c * dx - s * dy) * q1
+        ja[2, 0], ja[2, 1], ja[2, 2] = 0.0, 0.0, -q2
+        jb[0, 0], jb[0, 1], jb[0, 2] = c * q0, s * q0, 0.0
+        jb[1, 0], jb[1, 1], jb[1, 2] = -s * q1, c * q1, 0.0
+        jb[2, 0], jb[2, 1], jb[2, 2] = 0.0, 0.0, q2
+        for a in range(3):
+            ga = 0.0
+            gb = 0.0
+            for k in range(3):
+                ga += ja[k, a] * r[e, k]
+                gb += jb[k, a] * r[e, k]
+            g[3 * i + a] -= ga
+            g[3 * j + a] -= gb
+            for b in range(3):
+                hii = 0.0
+                hij = 0.0
+                hjj = 0.0
+                for k in range(3):
+                    hii += ja[k, a] * ja[k, b]
+                    hij += ja[k, a] * jb[k, b]
+                    hjj += jb[k, a] * jb[k, b]
+                data[pos[e, 0, 3 * a + b]] += hii
+                data[pos[e, 1, 3 * a + b]] += hij
+                data[pos[e, 2, 3 * b + a]] += hij
+                data[pos[e, 3, 3 * a + b]] += hjj
