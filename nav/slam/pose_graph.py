@@ -188,11 +188,12 @@ class _HessianPattern:
         return sp.csc_matrix((data, self.indices, self.indptr), shape=(size, size))
 
     def assemble(
-        self, poses: np.ndarray, edges: EdgeSet, w: np.ndarray, damping: float
+        self, poses: np.ndarray, edges: EdgeSet, w: np.ndarray, damping: float, err: np.ndarray | None = None
     ) -> tuple[sp.csc_matrix, np.ndarray]:
-        """Damped ``H`` and ``g = -J^T r`` at ``poses`` with robust weights ``w``."""
+        """Damped ``H`` and ``g = -J^T r`` at ``poses`` with robust weights ``w`` (``err``: the
+        poses' :func:`edge_errors`, when already computed)."""
         scale = np.ascontiguousarray(edges.sqrt_info * w[:, None])
-        r = edge_errors(poses, edges) * scale
+        r = (edge_errors(poses, edges) if err is None else err) * scale
         data = np.zeros(len(self.indices))
         g = np.zeros(3 * self.n)
         accumulate_normal_equations(poses, self._i, self._j, scale, r, self._edge_pos, data, g)
@@ -269,7 +270,7 @@ def optimize_pose_graph(
         prev_cost = cost
         w = np.where(edges.robust, _robust_weight(m, options), 1.0)
         if pattern is not None:
-            h, g = pattern.assemble(x, edges, w, options.damping)
+            h, g = pattern.assemble(x, edges, w, options.damping, err)
             dx = pattern.solve(h, g)
         else:
             h, g = normal_equations_reference(x, edges, w, n, fixed, options.damping)
