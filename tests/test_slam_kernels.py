@@ -195,6 +195,22 @@ def test_compiled_coarse_to_fine_search_equals_the_reference(
     assert math.hypot(fast[0].x, fast[0].y) < 0.06
 
 
+@pytest.mark.parametrize(("step", "wc"), [(1, 10), (4, 10), (8, 40), (16, 40)])
+def test_compiled_candidate_split_equals_numpys(step: int, wc: int) -> None:
+    rng = np.random.default_rng(step)
+    lo = -(wc // (2 * step)) - 2
+    cand = np.column_stack(
+        (rng.integers(0, 81, 300), rng.integers(lo, -lo, 300), rng.integers(lo, -lo, 300))
+    ).astype(np.int64)
+    kids = np.repeat(cand, 4, axis=0)  # the numpy split of matcher._correlative (compiled=False)
+    kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
+    kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
+    lo_y, lo_x = kids[:, 1] * step, kids[:, 2] * step
+    inside = (lo_y + step - 1 >= -wc) & (lo_y <= wc) & (lo_x + step - 1 >= -wc) & (lo_x <= wc)
+    assert 0 < np.count_nonzero(inside) < len(kids)  # both kept and dropped children
+    np.testing.assert_array_equal(kernels.split_candidates(cand, step, wc), kids[inside])
+
+
 def test_compiled_rotated_cells_equal_numpys() -> None:
     rng = np.random.default_rng(7)
     pts = rng.uniform(-8, 8, (150, 2))

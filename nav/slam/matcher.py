@@ -74,6 +74,16 @@ def _rotations(pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
     return np.stack((c * x - s * y, s * x + c * y), axis=-1)
 
 
+@functools.lru_cache(maxsize=16)
+def _top_candidates(angles: int, lo: int, nb: int) -> np.ndarray:
+    """Every ``(angle index, by, bx)`` of a coarse-to-fine search's top level, blocks ``lo`` ..
+    ``lo + nb - 1`` (cached, read-only: each window's is built once)."""
+    a_idx, by, bx = np.meshgrid(np.arange(angles), lo + np.arange(nb), lo + np.arange(nb), indexing="ij")
+    cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
+    cand.setflags(write=False)
+    return cand
+
+
 def score_candidates_reference(
     field: LikelihoodField, level: int, rows0: np.ndarray, cols0: np.ndarray, cand: np.ndarray, step: int
 ) -> np.ndarray:
@@ -154,11 +164,12 @@ def _correlative(
     field.ensure_levels(top)
     s = 1 << top
     blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
-    a_idx, by, bx = np.meshgrid(np.arange(len(thetas)), blocks, blocks, indexing="ij")
-    cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))  # (C, 3) at level `top`
+    cand = _top_candidates(len(thetas), int(blocks[0]), len(blocks))  # (C, 3) at level `top`
     for level in range(top, -1, -1):
         s = 1 << level
-        if level < top:  # split every kept candidate into its 4 children
+        if level < top and compiled:
+            cand = kernels.split_candidates(cand, s, wc)
+        elif level < top:  # split every kept candidate into its 4 children
             kids = np.repeat(cand, 4, axis=0)
             kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
             kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
