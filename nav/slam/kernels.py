@@ -686,3 +686,57 @@ def split_candidates(cand: np.ndarray, step: int, wc: int) -> np.ndarray:
                 out[m, 2] = bx
                 m += 1
     return out[:m]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _submap_cell(
+    px: float, py: float, x: float, y: float, cth: float, sth: float, ox: float, oy: float,
+    lo: np.ndarray, sn: np.ndarray, res: float,
+) -> tuple[float, bool]:  # fmt: skip
+    """Log-odds (0 where not observed) and observed flag of the submap cell under map point (px, py)."""
+    dx, dy = px - x, py - y
+    sc = math.floor((cth * dx + sth * dy - ox) / res)
+    sr = math.floor((-sth * dx + cth * dy - oy) / res)
+    if 0 <= sr < lo.shape[0] and 0 <= sc < lo.shape[1] and sn[sr, sc]:
+        return float(lo[sr, sc]), True
+    return 0.0, False
+
+
+@njit(cache=True, nogil=True)
+def place_submap(
+    pose: np.ndarray,
+    origin: np.ndarray,
+    lo: np.ndarray,
+    sn: np.ndarray,
+    gx: np.ndarray,
+    gy: np.ndarray,
+    res: float,
+    sample: float,
+    surface_wins: bool,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Map rendering (:mod:`nav.slam.render`): a submap's log-odds and observed mask at the map cells
+    centred at (gx[c], gy[r]) by inverse nearest-neighbour lookup; with ``surface_wins`` the most
+    occupied of the cells ``sample`` m from the centre towards each corner replaces it when above 0.
+    The same float operations as the numpy references ``render._lookup`` / ``render._surface_wins``
+    (equal arrays, tested)."""
+    x, y, th = pose[0], pose[1], pose[2]
+    cth, sth = math.cos(th), math.sin(th)
+    ox, oy = origin[0], origin[1]
+    val = np.empty((gy.shape[0], gx.shape[0]))
+    ok = np.empty((gy.shape[0], gx.shape[0]), dtype=np.bool_)
+    for r in range(gy.shape[0]):
+        for c in range(gx.shape[0]):
+            v, o = _submap_cell(gx[c], gy[r], x, y, cth, sth, ox, oy, lo, sn, res)
+            if surface_wins:
+                best = -np.inf
+                for k in range(4):
+                    sx = sample if k % 2 else -sample
+                    sy = sample if k // 2 else -sample
+                    v2, o2 = _submap_cell(gx[c] + sx, gy[r] + sy, x, y, cth, sth, ox, oy, lo, sn, res)
+                    if o2 and v2 > best:
+                        best = v2
+                if best > 0.0:
+                    v, o = best, True
+            val[r, c] = v
+            ok[r, c] = o
+    return val, ok

@@ -3,7 +3,8 @@
 Each submap's log-odds are resampled into the global grid by *inverse* nearest-neighbour mapping
 (every global cell in the submap's footprint looks up the submap cell under its centre), so rotated
 submaps leave no aliasing holes. Log-odds add up (independent evidence) and are clamped. One
-vectorized pass per submap: cost scales with map area, not with the number of scans.
+compiled pass per submap (:func:`nav.slam.kernels.place_submap`; :func:`_surface_wins` and
+:func:`_lookup` are its numpy references): cost scales with map area, not with the number of scans.
 """
 
 from __future__ import annotations
@@ -13,6 +14,7 @@ import math
 import numpy as np
 
 from nav.grid import LogOddsGrid, LogOddsOptions
+from nav.slam.kernels import place_submap
 from nav.types import Pose2D
 
 SubmapLayer = tuple[Pose2D, np.ndarray, np.ndarray, np.ndarray]
@@ -121,9 +123,10 @@ def render_submaps(
         rows = np.arange(c0[1], c1[1])
         gx = out.origin[0] + (cols + 0.5) * res
         gy = out.origin[1] + (rows + 0.5) * res
-        xx, yy = np.meshgrid(gx, gy)
-        place = _surface_wins if surface_wins else _lookup
-        val, ok = place(pose, origin, lo, sn, xx, yy, res)
+        # compiled (kernels.place_submap); the numpy _surface_wins / _lookup are its references
+        val, ok = place_submap(
+            pose.as_array(), origin, lo, sn, gx, gy, res, SURFACE_SAMPLE * res, surface_wins
+        )
         sub = (slice(c0[1], c1[1]), slice(c0[0], c1[0]))
         acc[sub] += val
         seen[sub] |= ok
