@@ -9,8 +9,8 @@ world (off the world's grid or in a region its outer walls enclose from outside)
 half a cell`` counts only those whose centre is more than 0.025 m from the building's free space,
 which separates rays that crossed a wall from free cells next to a wall that the map places a
 centimetre or two off (registration error of the SLAM map).
-The extent error is the largest of the four sides' differences between the saved grid's bounding
-box (in the world frame) and the world's occupied cells' bounding box.
+The extent error is the largest of the four sides' differences between the bounding box of the
+saved map's observed cells (in the world frame) and the world's occupied cells' bounding box.
 """
 
 from __future__ import annotations
@@ -65,7 +65,8 @@ class GhostReport:
     """Of ``in_walls + outside``, those whose centre is more than half a cell (0.025 m) from the
     building's free space: beyond what a centimetre of map registration error explains."""
     extent_error_m: float
-    """Largest side difference between the built grid's and the world's bounding boxes."""
+    """Largest side difference between the bounding boxes (world frame) of the built map's observed
+    cells and of the world's occupied cells."""
     built_size_m: tuple[float, float]
     world_size_m: tuple[float, float]
 
@@ -101,6 +102,20 @@ def _depth(pts: np.ndarray, interior: np.ndarray, geometry: GridGeometry, reach:
     return d.min(axis=1) * res if d.size else np.zeros(len(pts))
 
 
+def _observed_extent(built: OccupancyGrid, map_in_world: Pose2D) -> tuple[np.ndarray, np.ndarray]:
+    """World-frame bounding box of the built map's observed cells (their corners). Not the grid's
+    corners: the map frame starts at the robot's start pose, so a start heading oblique to the
+    walls rotates the whole grid, and its corners' box is metres wider than what was mapped (a
+    generated office started at -83 deg: 27.5 x 19.4 m of corners around a 24.35 x 13.6 m building
+    mapped within a few centimetres)."""
+    g = built.geometry
+    rows, cols = np.nonzero(built.data >= 0)
+    cells = np.column_stack((cols, rows)).astype(float)
+    corners = (cells[:, None, :] + np.array([[0, 0], [1, 0], [0, 1], [1, 1]])[None]).reshape(-1, 2)
+    corners = map_in_world.transform_points(g.origin.transform_points(corners * g.resolution))
+    return corners.min(axis=0), corners.max(axis=0)
+
+
 def ghost_report(
     built: OccupancyGrid, world_occupied: np.ndarray, world_geometry: GridGeometry, map_in_world: Pose2D
 ) -> GhostReport:
@@ -118,13 +133,7 @@ def ghost_report(
     ghost = in_walls | outside
     far = np.zeros_like(ghost)
     far[ghost] = _depth(pts[ghost], interior, wg) > 0.5 * wg.resolution
-    # extents: the built grid's corners in the world vs the world's occupied cells
-    h, w = built.data.shape
-    o = g.origin
-    corners = np.array([[0, 0], [w, 0], [0, h], [w, h]], dtype=float) * g.resolution
-    corners = Pose2D(o.x, o.y, o.theta).transform_points(corners)
-    corners = map_in_world.transform_points(corners)
-    b_lo, b_hi = corners.min(axis=0), corners.max(axis=0)
+    b_lo, b_hi = _observed_extent(built, map_in_world)
     orow, ocol = np.nonzero(world_occupied)
     wo = wg.origin
     w_lo = np.array([wo.x + ocol.min() * wg.resolution, wo.y + orow.min() * wg.resolution])

@@ -22,7 +22,7 @@ from nav.slam.loop_closure import LoopCandidate
 from nav.slam.render import render_submaps
 from nav.slam.synthetic import LOOP_WAYPOINTS, box_world, cast_scan, loop_trajectory
 from nav.slam.system import GraphSlam, SlamOptions, grazing_shortening
-from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, GridGeometry, LaserScan, Pose2D
+from nav.types import LETHAL_OBSTACLE, NO_INFORMATION, GridGeometry, LaserScan, OccupancyGrid, Pose2D
 from robot.sim import World
 
 
@@ -323,3 +323,26 @@ def test_grazing_shortening_follows_the_angle_to_the_surface() -> None:
     post = np.array([[1.0, 0.0]])
     assert grazing_shortening(post, 0.025)[0] == pytest.approx(0.025)
     assert grazing_shortening(pts, 0.0).max() == 0.0
+
+
+def test_extent_is_the_observed_cells_not_a_rotated_grids_corners() -> None:
+    """The map frame starts at the robot's start pose: a generated office started at -83 deg,
+    its map grid (axis-aligned in that frame) was rotated 7 deg off the walls and its corners'
+    box in the world was 27.5 x 19.4 m around a 24.35 x 13.6 m building mapped within centimetres
+    (extent error 2.95 m in ``mapping.ghost_family``). The extent is the observed cells'."""
+    res = 0.05
+    world = np.zeros((60, 100), dtype=bool)  # a 5 x 3 m building with 0.1 m walls
+    world[:2], world[-2:], world[:, :2], world[:, -2:] = True, True, True, True
+    world_geo = GridGeometry(res, 100, 60, Pose2D())
+    start = Pose2D(2.5, 1.5, math.radians(-83.0))
+    side = 160  # a map grid wide enough for the building in any rotation, most of it unobserved
+    geo = GridGeometry(res, side, side, Pose2D(-4.0, -4.0, 0.0))
+    rows, cols = np.mgrid[0:side, 0:side]
+    pts = start.transform_points(geo.cell_to_world(rows.ravel(), cols.ravel()))
+    wr, wc = world_geo.world_to_cell(pts)
+    inside = world_geo.in_bounds(wr, wc)
+    occ = inside & world[np.clip(wr, 0, 59), np.clip(wc, 0, 99)]
+    data = np.where(occ, 100, np.where(inside, 0, -1)).astype(np.int8).reshape(side, side)
+    r = ghost_report(OccupancyGrid(geo, data), world, world_geo, start)
+    assert r.extent_error_m < 0.1, r
+    assert r.built_size_m == pytest.approx((5.0, 3.0), abs=0.1)
