@@ -332,7 +332,8 @@ def test_maps_over_the_hardware_path(pair: EmulatorPair, patient_server: Embedde
     counts build and save a map, like with ``--robot sim``."""
     server = patient_server
     rt = server.runtime
-    with httpx.Client(base_url=server.url, timeout=20) as api:
+    # a first map save may compile the map render kernels (numba, cached after): give it time
+    with httpx.Client(base_url=server.url, timeout=120) as api:
         r = api.post("/api/mapping/start")
         assert r.status_code == 200, r.text
         with connect(f"{server.ws_url}/ws/teleop") as ws:

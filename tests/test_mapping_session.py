@@ -160,6 +160,7 @@ def test_loop_closure_corrects_injected_odometry_drift() -> None:
         drive.session.close()
 
 
+@pytest.mark.timeout(900)  # ~30 s of CPU; a CI run beside two busy loops and other jobs took > 300 s
 def test_office_corridor_loop_meets_issue_3() -> None:
     # Issue 3: >= 95 % of the true wall cells within one cell of the built map after the out-and-back
     # loop along the office's 25 m corridor (~10 s). Was 93.8 %: matches lagged behind the robot

@@ -149,9 +149,26 @@ def test_clock_sync_takes_least_delayed_sample_and_unwraps() -> None:
     s = _ClockSync()
     assert s.stamp(1_000_000, 101.010) == pytest.approx(101.010)
     assert s.stamp(1_020_000, 101.025) == pytest.approx(101.025)  # less delay: offset 100.005
-    assert s.stamp(1_040_000, 101.060) == pytest.approx(101.045)
+    rise = _ClockSync.MAX_DRIFT * 0.020  # what the offset may rise in 20 ms of MCU time
+    assert s.stamp(1_040_000, 101.060) == pytest.approx(101.045 + rise)  # more delay: offset kept
     wrap = s.stamp((1_060_000 + 2**32) & 0xFFFFFFFF, 101.070)
-    assert wrap == pytest.approx(101.065)
+    assert wrap == pytest.approx(101.065 + 2 * rise)
+
+
+def test_clock_sync_keeps_mcu_intervals_through_a_starved_host() -> None:
+    """The host reads nothing for 1 s, then reads every frame 1 s late for 5 s (longer than any
+    window of recent samples): the stamps keep the MCU's 20 ms intervals (within the clocks' drift)
+    instead of jumping 1 s ahead, which turned the gyro-fused heading by radians (CI, stop 31)."""
+    s = _ClockSync()
+    stamps = [s.stamp(k * 20_000, 100.0 + k * 0.02 + 0.002) for k in range(100)]
+    stamps += [s.stamp(k * 20_000, 100.0 + k * 0.02 + 1.0) for k in range(100, 400)]
+    steps = np.diff(stamps)
+    assert steps.min() > 0.0 and steps.max() < 0.02 * (1 + _ClockSync.MAX_DRIFT) + 1e-9
+    assert stamps[-1] == pytest.approx(100.002 + 399 * 0.02, abs=0.07)
+    # a clock that really drifts (the MCU 0.5 % slow) is followed
+    t = _ClockSync()
+    last = [t.stamp(k * 20_000, 100.0 + k * 0.02 * 1.005) for k in range(1000)][-1]
+    assert last == pytest.approx(100.0 + 999 * 0.02 * 1.005, abs=1e-3)
 
 
 # ---------------------------------------------------------------------------------------- start-up errors

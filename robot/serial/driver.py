@@ -135,14 +135,23 @@ def parse_serial_url(url: str) -> SerialOptions:
 
 
 class _ClockSync:
-    """Maps the MCU microsecond timer onto host time: offset = min over recent samples of
-    (host receive time - MCU time), the usual one-way-delay lower bound (the sample with the least
-    queuing delay), with wrap-around of the 32-bit timer unwrapped."""
+    """Maps the MCU microsecond timer onto host time: offset = the least (host receive time - MCU
+    time) seen, the usual one-way-delay lower bound (the sample with the least queuing delay), with
+    wrap-around of the 32-bit timer unwrapped.
 
-    def __init__(self, window: int = 100) -> None:
-        self._offsets = np.full(window, np.inf)
-        self._i = 0
+    The offset falls at once (a less delayed sample) but rises no faster than ``MAX_DRIFT`` s per s
+    of MCU time, what two clocks can drift apart. A minimum over a window of recent samples used to
+    forget the good sample after a starved second of the host: every sample in the window was late,
+    the offset jumped up by the delay, one tick interval lasted a second longer than the MCU's, and
+    the gyro's mean rate times it turned the odometry's heading by radians (seen in CI)."""
+
+    MAX_DRIFT = 0.01
+    """s/s; an MCU on its internal RC oscillator is within 1 % (a crystal within 50 ppm)."""
+
+    def __init__(self) -> None:
+        self._offset: float | None = None
         self._last_us: int | None = None
+        self._last_t = 0.0
         self._wraps = 0
 
     def stamp(self, mcu_us: int, host_t: float) -> float:
@@ -150,13 +159,18 @@ class _ClockSync:
             if self._last_us - mcu_us > 1 << 31:
                 self._wraps += 1
             else:  # the MCU rebooted: start over
-                self._offsets[:] = np.inf
+                self._offset = None
                 self._wraps = 0
         self._last_us = mcu_us
         mcu_t = (mcu_us + (self._wraps << 32)) * 1e-6
-        self._offsets[self._i % self._offsets.size] = host_t - mcu_t
-        self._i += 1
-        return mcu_t + float(self._offsets.min())
+        sample = host_t - mcu_t
+        if self._offset is None:
+            self._offset = sample
+        else:
+            drift = self.MAX_DRIFT * max(mcu_t - self._last_t, 0.0)
+            self._offset = min(sample, self._offset + drift)
+        self._last_t = mcu_t
+        return mcu_t + self._offset
 
 
 class _TickUnwrapper:
