@@ -126,11 +126,11 @@ def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
 
 def patient(pair: EmulatorPair) -> str:
     """For tests about something else than the watchdogs: a 2 s firmware command watchdog (its
-    maximum), a 3 s host link watchdog and a 3 s lidar silence limit, so emulator threads starved on a
+    maximum), a 3 s host link watchdog and a 10 s lidar silence limit, so emulator threads starved on a
     loaded machine fault nothing (seen under CI load: the emulated lidar silent 1.1 s, the emulated base
     1.05 s; a pulled port still faults at once). The robot URL to serve."""
     pair.base.params[ParamId.CMD_TIMEOUT] = 2.0
-    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=3.0&lidar_timeout=3.0"
+    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=3.0&lidar_timeout=10.0"
 
 
 @pytest.fixture
