@@ -547,15 +547,18 @@ def test_a_turn_that_presses_a_touching_leg_in_is_neither_offered_nor_passed() -
 
 
 @pytest.mark.parametrize("beams", [360, 720])
-def test_a_turn_whose_corner_would_clip_a_standing_walker_is_limited(beams: int) -> None:
-    """Greenhouse TEB trial 170 (family sets, stop 30): a walker stood 0.31 m from the skid base's
-    centre, its near side just inside the circle the corners sweep (0.156 m), and TEB turned in place
-    at 1 rad/s. At any one pose of the turn the corner overlaps the walker by a sliver holding one or
-    two of its lidar returns, never ``min_points`` (4), so a per-pose count passed the turn and the
-    corner clipped the walker. The readings the footprint sweeps over (the union over the turn's
-    poses) count: the turn toward the walker is limited; the turn away is not."""
+@pytest.mark.parametrize("near", [0.153, 0.155])
+def test_a_turn_whose_corner_would_clip_a_standing_walker_is_limited(near: float, beams: int) -> None:
+    """Greenhouse TEB trials 170 and 6 (family sets, stops 30-31): a walker stood 0.30-0.31 m from the
+    skid base's centre, its near side 1-3 mm inside the circle the corners sweep (0.156 m), and TEB
+    turned in place at 1 rad/s. At any one pose of the turn the corner overlaps the walker by a
+    sliver holding one or two of its lidar returns, never ``min_points`` (4), and between two checked
+    poses (a corner moves up to ``SWEEP_STEP``, 2 cm) the returns a millimetre inside its arc are in
+    neither pose's footprint: the turn passed and the corner clipped the walker. The readings the
+    footprint sweeps over (the union over the turn, its arcs between poses included) count: the turn
+    toward the walker is limited; the turn away is not."""
     a = math.radians(60.0)  # the front-left corner (39.8 deg) turns toward it when turning left
-    c = 0.153 + 0.15  # the walker's near side 0.153 m from base_link, its centre 0.303 m
+    c = near + 0.15  # the walker's near side ``near`` m from base_link
     scan = person_scan(0.0, c * math.cos(a), c * math.sin(a), beams=beams)
     f = SafetyFilter(load_profile("skid4"))
     out, reason = f(Twist2D(0.0, 0.0, 1.0), SensorFrame(stamp=0.0, scan=scan))
