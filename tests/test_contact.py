@@ -566,3 +566,22 @@ def test_a_turn_whose_corner_would_clip_a_standing_walker_is_limited(near: float
     g = SafetyFilter(load_profile("skid4"))
     away, _ = g(Twist2D(0.0, 0.0, -1.0), SensorFrame(stamp=0.0, scan=scan))
     assert away.wz < -0.5  # the corner turning away only meets it after most of a half turn
+
+
+def test_a_corner_meeting_a_walker_return_by_return_is_limited_at_the_first() -> None:
+    """Greenhouse TEB trial 6: a walker stood with its near side 0.148 m from the skid base's centre,
+    beside a rear corner (0.156 m), and TEB turned the corner into it at 0.35 rad/s. The corner meets
+    its returns one by one: counting ``min_points`` (4) of them predicted the contact 0.9 s away and
+    passed 0.26 rad/s, and the corner touched it. A return of a solid object (one of >= min_points
+    consecutive returns) counts alone: the turn is held to a crawl. A single stray return still
+    limits nothing."""
+    a, c = math.radians(-129.6), 0.148 + 0.15
+    walker = person_scan(0.0, c * math.cos(a), c * math.sin(a), beams=360)
+    f = SafetyFilter(load_profile("skid4"))
+    out, reason = f(Twist2D(0.0, 0.0, 0.35), SensorFrame(stamp=0.0, scan=walker))
+    assert out.wz < 0.1 and reason is not None and reason.startswith("approach"), (out, reason)
+    stray = np.full(360, np.inf)
+    stray[45] = 0.152  # one return at -135 deg, on the rear-right corner's arc
+    g = SafetyFilter(load_profile("skid4"))
+    scan = LaserScan(0.0, -math.pi, 2 * math.pi / 360, stray, 0.15, 6.0)
+    assert g(Twist2D(0.0, 0.0, 0.35), SensorFrame(stamp=0.0, scan=scan)) == (Twist2D(0.0, 0.0, 0.35), None)
