@@ -52,6 +52,7 @@ from scipy import ndimage, sparse
 from app.commands.explore import ExploreConfig, build_explore_stack, load_world, random_start, run_explore
 from bench.core import Benchmark, Figure
 from bench.ghost import FREE_MAX, _world_free_and_exterior
+from bench.visibility import visible_cells
 from nav.exploration import FrontierExplorer, distance_field
 from nav.types import INSCRIBED_INFLATED_OBSTACLE, Costmap, OccupancyGrid, Pose2D
 from robot.profiles import load_profile
@@ -148,8 +149,8 @@ class Sight:
 
 
 def sight(world, start: Pose2D, profile: str = "skid4", stride: float = 0.2, beams: int = 360) -> Sight:
-    """The candidate places and what each sees (class docstring). Vectorized per chunk of places;
-    the one loop is over chunks."""
+    """The candidate places and what each sees (class docstring): rays cast per chunk of places,
+    the cells along them walked by a compiled kernel (``bench.visibility``)."""
     prof = load_profile(profile)
     wg = world.geometry
     res = wg.resolution
@@ -166,26 +167,16 @@ def sight(world, start: Pose2D, profile: str = "skid4", stride: float = 0.2, bea
     target = reachable_free(world, start)
     index = np.full(target.shape, -1, dtype=np.int64)
     index[target] = np.arange(int(np.count_nonzero(target)))
-    n = int(np.count_nonzero(target))
     angles = np.linspace(-math.pi, math.pi, beams, endpoint=False)
     steps = np.arange(0.0, prof.lidar.range_max, res)
-    chunks: list[np.ndarray] = []
-    for a in range(0, len(views), 32):
-        v = views[a : a + 32]
-        ranges = world.raycaster.cast(v, np.broadcast_to(angles, (len(v), beams)), prof.lidar.range_max)
-        ranges = np.where(np.isfinite(ranges), ranges, prof.lidar.range_max)
-        along = steps[None, None, :] < ranges[:, :, None]  # (V, B, S): samples before the hit
-        vi, bi, si = np.nonzero(along)
-        pts = v[vi] + steps[si, None] * np.column_stack((np.cos(angles[bi]), np.sin(angles[bi])))
-        pr, pc = wg.world_to_cell(pts)
-        ok = wg.in_bounds(pr, pc)
-        cell = index[pr[ok], pc[ok]]
-        hit = cell >= 0
-        chunks.append(np.unique((a + vi[ok][hit]) * n + cell[hit]))
-    keys = np.concatenate(chunks) if chunks else np.zeros(0, dtype=np.int64)
-    sees = sparse.csr_matrix(
-        (np.ones(keys.size, dtype=bool), (keys // max(n, 1), keys % max(n, 1))), shape=(len(views), n)
-    )
+    ranges = np.empty((len(views), beams))
+    for a in range(0, len(views), 256):
+        v = views[a : a + 256]
+        ranges[a : a + 256] = world.raycaster.cast(
+            v, np.broadcast_to(angles, (len(v), beams)), prof.lidar.range_max
+        )
+    ranges = np.where(np.isfinite(ranges), ranges, prof.lidar.range_max)
+    sees = visible_cells(wg, index, views, ranges, angles, steps)
     return Sight(views, dist[rows, cols], sees, passable, prof.limits.max_vel_x)
 
 

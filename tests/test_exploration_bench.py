@@ -8,6 +8,7 @@ import pytest
 from scipy import ndimage
 
 import bench.explore as bx
+from bench.visibility import visible_cells, visible_cells_reference
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 from robot.sim import World
 
@@ -167,3 +168,57 @@ def test_a_place_a_click_failed_at_is_not_clicked_again():
     assert not edges.is_banned((1.0 + 1.1 * edges.options.blacklist_radius, 2.0))
     edges.forgive()  # a forgiven place may be clicked again
     assert not edges.is_banned((1.0, 2.0))
+
+
+def _same_sets(a, b) -> bool:
+    a, b = a.tocsr(), b.tocsr()
+    a.sort_indices()
+    b.sort_indices()
+    return a.shape == b.shape and np.array_equal(a.indptr, b.indptr) and np.array_equal(a.indices, b.indices)
+
+
+def test_the_sight_kernel_sees_the_same_cells_as_the_numpy_reference():
+    """The compiled walk along each ray gives every place the very cells the reference's sample
+    arrays give (offset origin, rays leaving the grid, ranges ending on a sample, cells not targets)."""
+    rng = np.random.default_rng(3)
+    geo = GridGeometry(0.05, 90, 70, Pose2D(-3.17, 2.41, 0.0))
+    target = rng.random((70, 90)) < 0.7
+    index = np.full(target.shape, -1, dtype=np.int64)
+    index[target] = np.arange(int(np.count_nonzero(target)))
+    views = geo.cell_to_world(rng.integers(0, 70, 40), rng.integers(0, 90, 40))
+    angles = np.linspace(-np.pi, np.pi, 72, endpoint=False)
+    steps = np.arange(0.0, 3.0, 0.05)
+    ranges = rng.uniform(0.0, 3.0, (40, 72))
+    ranges[:, ::5] = steps[rng.integers(0, steps.size, (40, 15))]  # exactly on a sample: not seen
+    ranges[::7] = 3.0  # rays to the range, many leaving the grid
+    fast = visible_cells(geo, index, views, ranges, angles, steps)
+    ref = visible_cells_reference(geo, index, views, ranges, angles, steps)
+    assert ref.nnz > 10_000
+    assert _same_sets(fast, ref)
+
+
+def test_sight_is_the_reference_sight(rooms):
+    world, s = rooms
+    wg = world.geometry
+    target = bx.reachable_free(world, START)
+    index = np.full(target.shape, -1, dtype=np.int64)
+    index[target] = np.arange(int(np.count_nonzero(target)))
+    angles = np.linspace(-np.pi, np.pi, 180, endpoint=False)
+    rmax = bx.load_profile("skid4").lidar.range_max
+    ranges = world.raycaster.cast(s.views, np.broadcast_to(angles, (len(s.views), 180)), rmax)
+    ranges = np.where(np.isfinite(ranges), ranges, rmax)
+    steps = np.arange(0.0, rmax, wg.resolution)
+    assert _same_sets(s.sees, visible_cells_reference(wg, index, s.views, ranges, angles, steps))
+
+
+def test_the_sight_kernel_refuses_a_rotated_grid():
+    geo = GridGeometry(0.05, 10, 10, Pose2D(0.0, 0.0, 0.3))
+    with pytest.raises(ValueError, match="rotated"):
+        visible_cells(
+            geo,
+            np.zeros((10, 10), np.int64),
+            np.zeros((1, 2)),
+            np.ones((1, 1)),
+            np.zeros(1),
+            np.arange(0.0, 1.0, 0.05),
+        )
