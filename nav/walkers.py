@@ -31,6 +31,12 @@ MAX_SCAN_GAP = 1.0
 """s; clusters of a scan older than this are not matched (the walker may be anywhere)."""
 
 
+def scan_clusters(pts: np.ndarray) -> np.ndarray:
+    """Cluster label per return (N, 2, in scan order, N >= 1): consecutive returns less than
+    ``CLUSTER_GAP`` apart share one, numbered from 0 in scan order."""
+    return np.concatenate(([0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T) > CLUSTER_GAP)))
+
+
 class WalkerTracker:
     """``update(points, stamp) -> velocity per point``; ``centres`` / ``velocities`` hold the
     walkers (moving person-sized clusters) of the latest scan, in the frame of its points."""
@@ -54,7 +60,7 @@ class WalkerTracker:
         if pts.shape[0] == 0:
             self._clusters, self._stamp = np.zeros((0, 2)), stamp
             return vel
-        label = np.concatenate(([0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T) > CLUSTER_GAP)))
+        label = scan_clusters(pts)
         count = np.bincount(label)
         centre = (
             np.column_stack((np.bincount(label, pts[:, 0]), np.bincount(label, pts[:, 1]))) / count[:, None]

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.types import ZERO_TWIST, Pose2D, Twist2D
-from nav.walkers import CLUSTER_GAP, PERSON_MAX_SPEED, WalkerTracker
+from nav.walkers import PERSON_MAX_SPEED, WalkerTracker, scan_clusters
 from robot.base import SensorFrame
 from robot.kinematics import integrate_twist, se2_exp
 from robot.profiles import RobotProfile
@@ -302,7 +302,7 @@ class SafetyFilter:
         than ``CLUSTER_GAP`` apart, i.e. of an object the scan really saw, not a stray return."""
         if pts.shape[0] == 0:
             return np.zeros(0, dtype=bool)
-        label = np.concatenate(([0], np.cumsum(np.hypot(*np.diff(pts, axis=0).T) > CLUSTER_GAP)))
+        label = scan_clusters(pts)
         return np.bincount(label)[label] >= self.options.min_points
 
     def _approach_weights(self, w: np.ndarray, solid: np.ndarray) -> np.ndarray:
