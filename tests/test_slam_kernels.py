@@ -347,3 +347,15 @@ def test_compiled_window_moments_and_surface_lines_equal_numpys_bit_for_bit(seed
             info = translation_information(pts, theta, half)
             assert np.array_equal(info, translation_information_reference(pts, theta, half))
     assert surface_lines(clouds[0])[1].mean() > 0.5  # walls: most points are on a line
+
+
+@pytest.mark.parametrize(("shape", "step"), [((37, 53), 4), ((64, 32), 8), ((5, 3), 16), ((9, 11), 1)])
+def test_compiled_phase_split_equals_numpys_strided_slices(shape: tuple[int, int], step: int) -> None:
+    grid = np.random.default_rng(step).random(shape).astype(np.float32)
+    phase = kernels.phase_split(grid, step)
+    h, w = -(-shape[0] // step), -(-shape[1] // step)
+    assert phase.shape == (step, step, h, w)
+    padded = np.pad(grid, ((0, h * step - shape[0]), (0, w * step - shape[1])))
+    for pr in range(step):
+        for pc in range(step):
+            assert np.array_equal(phase[pr, pc], padded[pr::step, pc::step])

@@ -126,9 +126,11 @@ def phase_split(grid: np.ndarray, step: int) -> np.ndarray:
     if step == 1:
         return grid.reshape((1, 1, h, w))
     phase = np.zeros((step, step, -(-h // step), -(-w // step)), dtype=grid.dtype)
-    for r in range(h):
-        for c in range(w):
-            phase[r % step, c % step, r // step, c // step] = grid[r, c]
+    for pr in range(step):  # phase by phase: strided reads, contiguous writes, no division
+        for pc in range(step):
+            for rr in range(-(-(h - pr) // step)):
+                for cc in range(-(-(w - pc) // step)):
+                    phase[pr, pc, rr, cc] = grid[rr * step + pr, cc * step + pc]
     return phase
 
 
