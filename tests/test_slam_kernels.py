@@ -226,8 +226,8 @@ def test_compiled_rotated_cells_equal_numpys() -> None:
 
 
 @pytest.mark.parametrize("size", [40, 600])
-def test_compiled_top_level_scores_equal_the_reference_split_or_not(size: int) -> None:
-    # a small grid is split into phases first, a large one read in place: the same sums either way
+def test_compiled_top_level_scores_equal_the_reference(size: int) -> None:
+    # a scan-sized and a submap-sized grid, both split into phases, points past every edge
     rng = np.random.default_rng(size)
     field = LikelihoodField(rng.random((size, size)).astype(np.float32), np.zeros(2), 0.05, levels=2)
     rows0 = rng.integers(-8, size + 8, (3, 100))
