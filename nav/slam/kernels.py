@@ -262,12 +262,10 @@ def gauss_newton(
 ) -> tuple[np.ndarray, float]:
     """Gauss-Newton on ``sum (1 - F(T p_i))^2 occupied_weight / N`` plus translation / rotation
     priors towards ``prior``; the 3 x 3 normal equations are accumulated point by point (same
-    cost function, Jacobian, damping and stopping rule as ``matcher.refine_pose_reference``).
-    Returns the pose (x, y, theta wrapped) and the mean field value at it."""
+    cost function, Jacobian and damping as ``matcher.refine_pose_reference``). Returns the pose
+    (x, y, theta wrapped) and the mean field value at it."""
     n = pts.shape[0]
     x = x0.copy()
-    last = x0.copy()
-    last_cost = math.inf
     wo2 = occupied_weight / n  # wo^2
     h = np.empty((3, 3))
     b = np.empty(3)
@@ -275,7 +273,6 @@ def gauss_newton(
         c, s = math.cos(x[2]), math.sin(x[2])
         h[:] = 0.0
         b[:] = 0.0
-        ee = 0.0
         for i in range(n):
             px, py = pts[i, 0], pts[i, 1]
             f, gx, gy = _bilinear(g, ox, oy, res, c * px - s * py + x[0], s * px + c * py + x[1])
@@ -288,17 +285,9 @@ def gauss_newton(
             h[1, 2] += gy * jt
             h[2, 2] += jt * jt
             e = 1.0 - f
-            ee += e * e
             b[0] -= gx * e
             b[1] -= gy * e
             b[2] -= jt * e
-        dth = _wrap(x[2] - prior[2])
-        cost = wo2 * ee + wt * wt * ((x[0] - prior[0]) ** 2 + (x[1] - prior[1]) ** 2) + wr * wr * dth * dth
-        if cost >= last_cost:  # the last step did not lower the cost: keep the pose before it
-            x[:] = last
-            break
-        last[:] = x
-        last_cost = cost
         h *= wo2
         b *= wo2
         h[1, 0] = h[0, 1]
@@ -309,7 +298,7 @@ def gauss_newton(
         h[2, 2] += wr * wr + 1e-9
         b[0] += wt * wt * (x[0] - prior[0])
         b[1] += wt * wt * (x[1] - prior[1])
-        b[2] += wr * wr * dth
+        b[2] += wr * wr * _wrap(x[2] - prior[2])
         step = -np.linalg.solve(h, b)
         x += step
         if np.abs(step).max() < tolerance:
