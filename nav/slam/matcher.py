@@ -357,21 +357,15 @@ def fuse_with_prediction(match: Pose2D, prediction: Pose2D, info: np.ndarray, th
     match's."""
     if threshold <= 0.0:
         return match
-    # the 2 x 2 symmetric eigen-decomposition in closed form (LAPACK's eigh through numpy cost
-    # ~0.1 ms per scan in call overhead): eigenvalues mean +- spread, the larger one's
-    # eigenvector at angle phi
-    a, b, c = float(info[0, 0]), 0.5 * float(info[0, 1] + info[1, 0]), float(info[1, 1])
-    spread = math.hypot(0.5 * (a - c), b)
-    lam_hi, lam_lo = 0.5 * (a + c) + spread, 0.5 * (a + c) - spread
-    if lam_hi <= 0.0:
+    lam, vec = np.linalg.eigh(0.5 * (info + info.T))
+    lmax = float(lam.max())
+    if lmax <= 0.0:
         return Pose2D(prediction.x, prediction.y, match.theta)
-    r = max(lam_lo, 0.0) / lam_hi
-    keep_hi, keep_lo = 1.0 / (1.0 + threshold**2), r**2 / (r**2 + threshold**2)
-    phi = 0.5 * math.atan2(2.0 * b, a - c)
-    ux, uy = math.cos(phi), math.sin(phi)  # along lam_hi; (-uy, ux) along lam_lo
-    ox, oy = match.x - prediction.x, match.y - prediction.y
-    du, dv = keep_hi * (ux * ox + uy * oy), keep_lo * (ux * oy - uy * ox)
-    return Pose2D(prediction.x + du * ux - dv * uy, prediction.y + du * uy + dv * ux, match.theta)
+    r = np.clip(lam, 0.0, None) / lmax
+    keep = r**2 / (r**2 + threshold**2)
+    off = np.array([match.x - prediction.x, match.y - prediction.y])
+    moved = vec @ (keep * (vec.T @ off))
+    return Pose2D(prediction.x + float(moved[0]), prediction.y + float(moved[1]), match.theta)
 
 
 def match_scan(
