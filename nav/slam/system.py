@@ -40,7 +40,7 @@ from nav.slam.matcher import (
     translation_information,
 )
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
-from nav.slam.render import SubmapLayer, render_submaps
+from nav.slam.render import SubmapLayer, render_submaps, view_logodds
 from nav.slam.submap import Submap
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
@@ -82,6 +82,15 @@ class SlamOptions:
     ghost free space). Why off: at 0.025 the ghost bench's in-wall cells fell 8 / 62 / 51 -> 2 / 48
     / 30 (apartment / office / greenhouse) but FR079 scored 0.0455 m instead of 0.0440 m (Intel
     0.0340, ACES 0.0373; docs/benchmarks.md, stop 30), and the real logs decide."""
+    view_grazing_margin: float = 0.025
+    """The same test for the map users get only (render, save, 3D view), 0 = off: each submap keeps
+    per cell which firm evidence came last (``LogOddsGrid.view``): a return landing there, or a ray
+    crossing it farther than this (m) from the surface it hit; crossings within it (the grazing
+    stretch of :func:`grazing_shortening`) do not count. The rendered map shows a cell a return
+    marked last as at least occupied, one no firm crossing reached as at least unknown
+    (:func:`nav.slam.render.view_logodds`); the grids the front end and loop closure match against
+    are the plain log-odds, so trajectories do not change (stop 30's ``grazing_ray_margin`` changed
+    them: FR079 got worse)."""
     minimum_travel_distance: float = 0.1
     """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
     minimum_travel_heading: float = math.radians(5.0)
@@ -466,13 +475,20 @@ class GraphSlam:
         self._last_node_stamp = float(scan.stamp)
         # submap bookkeeping: start a new one when the newest has submap_num_range_data nodes
         if not self._submaps or len(self._submaps[-1].nodes) >= o.submap_num_range_data:
-            sm = Submap(len(self._submaps), local, o.grid_options(), o.likelihood_sigma)
+            sm = Submap(
+                len(self._submaps), local, o.grid_options(), o.likelihood_sigma, o.view_grazing_margin > 0.0
+            )
             self._submaps.append(sm)
             self._submap_global.append(self._correction.compose(local).as_array())
         shorten = grazing_shortening(pts_laser, o.grazing_ray_margin)
+        view_shorten = (
+            shorten
+            if o.view_grazing_margin == o.grazing_ray_margin
+            else grazing_shortening(pts_laser, o.view_grazing_margin)
+        )
         for sm in self._submaps[-2:]:  # the older, fuller submap first: it shortens the misses
             if not sm.finished:
-                misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten)
+                misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten, view_shorten)
                 node.submaps.append(sm.index)
                 if len(sm.nodes) >= 2 * o.submap_num_range_data:
                     sm.finished = True
@@ -888,7 +904,7 @@ class GraphSlam:
             n = len(self._nodes)
             if self._map is not None and self._map_nodes == n:
                 return self._map
-            grids = self._submap_layers()
+            grids = self._submap_layers(view=True)
         grid = render_submaps(grids, self.options.grid_options(), self.options.surface_wins_across_submaps)
         out = grid.to_occupancy_grid()
         with self._lock:
@@ -904,13 +920,15 @@ class GraphSlam:
             grids = self._submap_layers()
         return render_submaps(grids, self.options.grid_options(), surface_wins=False).to_occupancy_grid()
 
-    def _submap_layers(self) -> list[SubmapLayer]:
-        """Copies of the submaps' grids with their map poses (caller holds the lock)."""
+    def _submap_layers(self, view: bool = False) -> list[SubmapLayer]:
+        """Copies of the submaps' grids with their map poses (caller holds the lock); ``view``: the
+        log-odds as users see them (:func:`nav.slam.render.view_logodds`), else the plain evidence."""
+        l_occ = self.options.grid_options().l_occ
         return [
             (
                 Pose2D.from_array(self._submap_global[j]),
                 sm.grid.origin.copy(),
-                sm.grid.logodds.copy(),
+                view_logodds(sm.grid.logodds, sm.grid.view, l_occ) if view else sm.grid.logodds.copy(),
                 sm.grid.seen.copy(),
             )
             for j, sm in enumerate(self._submaps)
