@@ -305,19 +305,44 @@ def _dropout_reach(r: np.ndarray, hit: np.ndarray, resolution: float) -> np.ndar
     return np.where(np.isinf(r) & np.isfinite(reach), np.maximum(reach, 0.0), np.inf)
 
 
-def grazing_shortening(pts: np.ndarray, margin: float) -> np.ndarray:
+def grazing_shortening(pts: np.ndarray, margin: float, neighbours: bool = False) -> np.ndarray:
     """Per return (``pts`` (N, 2) in the laser frame, beam order): how far short of it its ray
     stops clearing, ``margin / sin(a)`` with ``a`` the angle between the beam and the surface it
     hit (the :func:`surface_lines` line through its neighbours; 90 deg, head-on, where there is no
     line: a corner, a post, clutter), at most the whole ray: over that stretch the beam ran within
-    ``margin`` of the surface, through cells the surface may cross."""
+    ``margin`` of the surface, through cells the surface may cross.
+
+    ``neighbours``: where there is no line, the smaller angle between the beam and the segments to
+    the previous and the next return instead of head-on. A face seen at a few degrees from the end
+    of an aisle or a corridor has its returns metres apart, and the seven-return window spans the
+    gap to the beams that went out of range and the opposite face, so no line fits; a single
+    neighbour on the same face still gives its direction. A neighbour on another surface (a depth
+    jump) gives a segment near the beam's direction: that ray counts as grazing, which only keeps
+    the map view from clearing with it (:attr:`SlamOptions.view_grazing_margin`)."""
     if pts.shape[0] == 0 or margin <= 0.0:
         return np.zeros(pts.shape[0])
     r = np.hypot(pts[:, 0], pts[:, 1])
     along, line = surface_lines(pts)
     sin_a = np.abs(pts[:, 0] * np.sin(along) - pts[:, 1] * np.cos(along)) / np.maximum(r, 1e-9)
-    sin_a = np.where(line, sin_a, 1.0)
+    fallback = _neighbour_sin(pts, r) if neighbours else 1.0
+    sin_a = np.where(line, sin_a, fallback)
     return np.minimum(margin / np.maximum(sin_a, margin / np.maximum(r, margin)), r)
+
+
+def _neighbour_sin(pts: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Per return, the smaller |sin| of the angles between its beam and the segments to the previous
+    and next return (1 where it has neither)."""
+    seg = np.diff(pts, axis=0)
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    cross = np.abs(pts[:-1, 0] * seg[:, 1] - pts[:-1, 1] * seg[:, 0])  # beam i x (p[i+1] - p[i])
+    cross_next = np.abs(pts[1:, 0] * seg[:, 1] - pts[1:, 1] * seg[:, 0])  # beam i+1 x the same
+    ok = length > 1e-9
+    to_next = np.where(ok, cross / np.maximum(r[:-1] * length, 1e-12), 1.0)
+    to_prev = np.where(ok, cross_next / np.maximum(r[1:] * length, 1e-12), 1.0)
+    out = np.ones(pts.shape[0])
+    out[:-1] = to_next
+    out[1:] = np.minimum(out[1:], to_prev)
+    return out
 
 
 def _close(a: Pose2D, b: Pose2D, resolution: float) -> bool:
@@ -481,11 +506,7 @@ class GraphSlam:
             self._submaps.append(sm)
             self._submap_global.append(self._correction.compose(local).as_array())
         shorten = grazing_shortening(pts_laser, o.grazing_ray_margin)
-        view_shorten = (
-            shorten
-            if o.view_grazing_margin == o.grazing_ray_margin
-            else grazing_shortening(pts_laser, o.view_grazing_margin)
-        )
+        view_shorten = grazing_shortening(pts_laser, o.view_grazing_margin, neighbours=True)
         for sm in self._submaps[-2:]:  # the older, fuller submap first: it shortens the misses
             if not sm.finished:
                 misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten, view_shorten)
