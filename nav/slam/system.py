@@ -305,7 +305,9 @@ def _dropout_reach(r: np.ndarray, hit: np.ndarray, resolution: float) -> np.ndar
     return np.where(np.isinf(r) & np.isfinite(reach), np.maximum(reach, 0.0), np.inf)
 
 
-def grazing_shortening(pts: np.ndarray, margin: float, neighbours: bool = False) -> np.ndarray:
+def grazing_shortening(
+    pts: np.ndarray, margin: float, neighbours: bool = False, heading_sigma: float = 0.0
+) -> np.ndarray:
     """Per return (``pts`` (N, 2) in the laser frame, beam order): how far short of it its ray
     stops clearing, ``margin / sin(a)`` with ``a`` the angle between the beam and the surface it
     hit (the :func:`surface_lines` line through its neighbours; 90 deg, head-on, where there is no
@@ -318,10 +320,15 @@ def grazing_shortening(pts: np.ndarray, margin: float, neighbours: bool = False)
     gap to the beams that went out of range and the opposite face, so no line fits; a single
     neighbour on the same face still gives its direction. A neighbour on another surface (a depth
     jump) gives a segment near the beam's direction: that ray counts as grazing, which only keeps
-    the map view from clearing with it (:attr:`SlamOptions.view_grazing_margin`)."""
+    the map view from clearing with it (:attr:`SlamOptions.view_grazing_margin`).
+
+    ``heading_sigma`` (rad): the margin grows by ``range * heading_sigma``, how far a heading error
+    of that size moves the ray's end across its surface (a face seen from 5 m is placed to within
+    a few centimetres, not half a cell)."""
     if pts.shape[0] == 0 or margin <= 0.0:
         return np.zeros(pts.shape[0])
     r = np.hypot(pts[:, 0], pts[:, 1])
+    margin = margin + heading_sigma * r
     along, line = surface_lines(pts)
     sin_a = np.abs(pts[:, 0] * np.sin(along) - pts[:, 1] * np.cos(along)) / np.maximum(r, 1e-9)
     fallback = _neighbour_sin(pts, r) if neighbours else 1.0
@@ -506,7 +513,9 @@ class GraphSlam:
             self._submaps.append(sm)
             self._submap_global.append(self._correction.compose(local).as_array())
         shorten = grazing_shortening(pts_laser, o.grazing_ray_margin)
-        view_shorten = grazing_shortening(pts_laser, o.view_grazing_margin, neighbours=True)
+        view_shorten = grazing_shortening(
+            pts_laser, o.view_grazing_margin, neighbours=True, heading_sigma=o.constraint_rotation_sigma
+        )
         for sm in self._submaps[-2:]:  # the older, fuller submap first: it shortens the misses
             if not sm.finished:
                 misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten, view_shorten)
