@@ -412,3 +412,26 @@ def test_map_view_rule_does_not_change_the_trajectory() -> None:
     free_off, free_on = ((m.data >= 0) & (m.data <= 25) for m in (map_off, map_on))
     assert not (free_on & ~free_off).any()  # the rule never makes a cell free
     assert free_on.sum() > 0.9 * free_off.sum()
+
+
+def test_view_shortening_takes_a_grazing_angle_from_a_neighbour_across_a_gap() -> None:
+    """Looking down an aisle: the beams near its axis go out of range (no return), so the returns
+    nearest the gap, the most grazing ones, have a seven-return window spanning both faces and no
+    line fits. Head-on was the fallback (their rays cleared the face cells); with ``neighbours``
+    the segment to the next return on the same face gives the angle."""
+    left = _grazing_scan(0.605, (4.0, 14.0), 30)
+    right = _grazing_scan(-0.6, (-14.0, -4.0), 30)
+    pts = np.vstack((right, left))  # beam order, the gap between -4 and 4 deg
+    k = 30  # the first return on the left face, at 4 deg to it
+    margin = 0.025
+    assert grazing_shortening(pts, margin)[k] == pytest.approx(margin)  # no line: head-on
+    # the face runs along x; the beam at 4 deg: margin / sin(4 deg)
+    got = grazing_shortening(pts, margin, neighbours=True)[k]
+    assert got == pytest.approx(margin / math.sin(math.radians(4.0)), rel=0.1)
+    # where a line fits, the neighbours do not change it; the margin grows with the range
+    assert grazing_shortening(pts, margin, neighbours=True)[45] == pytest.approx(
+        grazing_shortening(pts, margin)[45]
+    )
+    r = float(np.hypot(*pts[45]))
+    grown = grazing_shortening(pts, margin, neighbours=True, heading_sigma=0.01)[45]
+    assert grown == pytest.approx(min(grazing_shortening(pts, margin)[45] * (margin + 0.01 * r) / margin, r))

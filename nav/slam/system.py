@@ -85,8 +85,10 @@ class SlamOptions:
     view_grazing_margin: float = 0.025
     """The same test for the map users get only (render, save, 3D view), 0 = off: each submap keeps
     per cell which firm evidence came last (``LogOddsGrid.view``): a return landing there, or a ray
-    crossing it farther than this (m) from the surface it hit; crossings within it (the grazing
-    stretch of :func:`grazing_shortening`) do not count. The rendered map shows a cell a return
+    crossing it farther than this (m) plus ``range * constraint_rotation_sigma`` (where a heading
+    error of one sigma puts the ray's end across its surface) from the surface it hit; crossings
+    within it (the stretch of :func:`grazing_shortening`, a return without a fitting line taking its
+    angle from its neighbours' segments) do not count. The rendered map shows a cell a return
     marked last as at least occupied, one no firm crossing reached as at least unknown
     (:func:`nav.slam.render.view_logodds`); the grids the front end and loop closure match against
     are the plain log-odds, so trajectories do not change (stop 30's ``grazing_ray_margin`` changed
