@@ -65,6 +65,16 @@ class LogOddsOptions:
         return prob_to_logodds(self.max_probability)
 
 
+VIEW_UNSURE = 0
+"""``LogOddsGrid.view``: no return landed in the cell and no ray crossed it far from the surface it
+hit (never observed, or crossed only by rays running within a margin of their own surface)."""
+VIEW_CLEARED = 1
+"""``LogOddsGrid.view``: the last firm evidence was a ray crossing the cell far from its surface."""
+VIEW_HIT = 2
+"""``LogOddsGrid.view``: the last firm evidence was a return in the cell (rays crossing it since ran
+within a margin of their own surface: they grazed the face the cell holds)."""
+
+
 def trace_rays(origins: np.ndarray, ends: np.ndarray, step: float) -> tuple[np.ndarray, np.ndarray]:
     """Sample points along every segment ``origins[i] -> ends[i]`` (excluding the end point).
 
@@ -94,6 +104,8 @@ def _insert_kernel(
     ends: np.ndarray,
     hit: np.ndarray,
     shorten: np.ndarray,
+    view: np.ndarray,
+    view_shorten: np.ndarray,
     step: float,
     l_occ: np.float32,
     l_free: np.float32,
@@ -103,9 +115,13 @@ def _insert_kernel(
     """:meth:`LogOddsGrid.insert_rays_reference` compiled: the same samples (``trace_rays``), the
     same once-per-cell update and the same stop rule for return-less rays, but only the cells the
     rays cross are touched (no pass over the whole grid); samples of a ray with a return within
-    ``shorten[i]`` of its end do not clear cells the grid holds occupied. Returns (cells that became occupied,
+    ``shorten[i]`` of its end do not clear cells the grid holds occupied. ``view`` (flat, empty when not
+    kept): each touched cell's :data:`VIEW_HIT` / :data:`VIEW_CLEARED` state, a cell only crossed within
+    ``view_shorten[i]`` of its ray's return kept as it was. Returns (cells that became occupied,
     count that became free, per miss ray the fraction kept)."""
+    # mark bits: 1 crossed, 2 hit by this scan, 4 crossed by a ray far from its own surface
     mark = np.zeros(flat.size, dtype=np.int8)
+    track = view.size > 0
     touched = np.empty(64, dtype=np.int64)
     nt = 0
     m = ends.shape[0]
@@ -139,7 +155,7 @@ def _insert_kernel(
             idx = r * width + c
             if hit[i] and flat[idx] > 0.0 and (1.0 - f) * length < shorten[i]:
                 continue
-            if not hit[i] and (mark[idx] == 2 or flat[idx] > 0.0):
+            if not hit[i] and ((mark[idx] & 2) != 0 or flat[idx] > 0.0):
                 stop = k
                 break
             if mark[idx] == 0:
@@ -148,6 +164,8 @@ def _insert_kernel(
                 touched[nt] = idx
                 nt += 1
                 mark[idx] = 1
+            if track and not (hit[i] and (1.0 - f) * length < view_shorten[i]):
+                mark[idx] |= 4
         if not hit[i]:
             reach[j] = stop / n
             j += 1
@@ -157,10 +175,15 @@ def _insert_kernel(
     for t in range(nt):
         idx = touched[t]
         before = flat[idx] > 0.0
-        v = flat[idx] + (l_occ if mark[idx] == 2 else l_free)
+        v = flat[idx] + (l_occ if (mark[idx] & 2) != 0 else l_free)
         flat[idx] = min(max(v, l_min), l_max)
         after = flat[idx] > 0.0
         seen[idx] = True
+        if track:
+            if (mark[idx] & 2) != 0:
+                view[idx] = VIEW_HIT
+            elif (mark[idx] & 4) != 0:
+                view[idx] = VIEW_CLEARED
         if after and not before:
             occupied[n_occ] = idx
             n_occ += 1
@@ -203,12 +226,17 @@ class LogOddsGrid:
         origin_xy: tuple[float, float] = (0.0, 0.0),
         width: int = 0,
         height: int = 0,
+        track_view: bool = False,
     ) -> None:
         self.options = options or LogOddsOptions()
         self.resolution = self.options.resolution
         self.origin = np.array(origin_xy, dtype=float)
         self.logodds = np.zeros((height, width), dtype=np.float32)
         self.seen = np.zeros((height, width), dtype=bool)
+        self.view: np.ndarray | None = np.zeros((height, width), dtype=np.uint8) if track_view else None
+        """Per cell :data:`VIEW_UNSURE` / :data:`VIEW_CLEARED` / :data:`VIEW_HIT` (``track_view``):
+        which firm evidence came last, for a display that keeps faces only grazing rays cleared
+        (:func:`nav.slam.render.view_logodds`); None when not kept."""
 
     # -- geometry ---------------------------------------------------------------------------------
     @property
@@ -252,9 +280,15 @@ class LogOddsGrid:
         size = np.ceil((new_hi - new_origin) / self.resolution).astype(np.int64) + 1
         lo_new = np.zeros((size[1], size[0]), dtype=np.float32)
         seen_new = np.zeros((size[1], size[0]), dtype=bool)
+        inner = (slice(shift[1], shift[1] + h), slice(shift[0], shift[0] + w))
         if w and h:
-            lo_new[shift[1] : shift[1] + h, shift[0] : shift[0] + w] = self.logodds
-            seen_new[shift[1] : shift[1] + h, shift[0] : shift[0] + w] = self.seen
+            lo_new[inner] = self.logodds
+            seen_new[inner] = self.seen
+        if self.view is not None:
+            view_new = np.zeros((size[1], size[0]), dtype=np.uint8)
+            if w and h:
+                view_new[inner] = self.view
+            self.view = view_new
         self.logodds, self.seen, self.origin = lo_new, seen_new, np.asarray(new_origin, dtype=float)
 
     # -- updates ----------------------------------------------------------------------------------
@@ -274,14 +308,21 @@ class LogOddsGrid:
         return origins, ends, np.asarray(hit, dtype=bool), old_shape
 
     def insert_rays(
-        self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray, shorten: np.ndarray | None = None
+        self,
+        origins: np.ndarray,
+        ends: np.ndarray,
+        hit: np.ndarray,
+        shorten: np.ndarray | None = None,
+        view_shorten: np.ndarray | None = None,
     ) -> InsertResult:
         """Integrate one scan's rays ``origins[i] -> ends[i]`` (grid frame). ``hit[i]`` marks the end
         as an obstacle (else the ray only clears free space, e.g. a truncated max-range beam).
         ``shorten[i]`` (m, default 0): ray ``i``, when it has a return, does not clear a cell the grid
         holds occupied within that distance of its end (a beam that met its surface at a grazing
         angle ran along it, through the cells that hold it:
-        :func:`nav.slam.system.grazing_shortening`). Compiled (:func:`_insert_kernel`); semantics as
+        :func:`nav.slam.system.grazing_shortening`). ``view_shorten[i]`` (m, default 0): where the
+        grid keeps ``view``, the stretch of ray ``i``'s end that does not count as clearing there (the
+        log-odds are updated as usual). Compiled (:func:`_insert_kernel`); semantics as
         :meth:`insert_rays_reference`."""
         rays = self._grown_for(origins, ends, hit)
         if rays is None:
@@ -299,6 +340,8 @@ class LogOddsGrid:
             np.ascontiguousarray(ends),
             np.ascontiguousarray(hit),
             _shortening(shorten, ends.shape[0]),
+            self._view_flat(),
+            _shortening(view_shorten, ends.shape[0]),
             self.resolution * opt.step_fraction,
             np.float32(opt.l_occ),
             np.float32(opt.l_free),
@@ -307,8 +350,16 @@ class LogOddsGrid:
         )
         return InsertResult(occupied, n_free, self.shape != old_shape, reach)
 
+    def _view_flat(self) -> np.ndarray:
+        return self.view.reshape(-1) if self.view is not None else np.zeros(0, dtype=np.uint8)
+
     def insert_rays_reference(
-        self, origins: np.ndarray, ends: np.ndarray, hit: np.ndarray, shorten: np.ndarray | None = None
+        self,
+        origins: np.ndarray,
+        ends: np.ndarray,
+        hit: np.ndarray,
+        shorten: np.ndarray | None = None,
+        view_shorten: np.ndarray | None = None,
     ) -> InsertResult:
         """Pure-numpy reference of :meth:`insert_rays` (the tests compare the two).
 
@@ -331,17 +382,23 @@ class LogOddsGrid:
         length = np.hypot(d[:, 0], d[:, 1])
         n = np.maximum(np.ceil(length / (self.resolution * opt.step_fraction)).astype(np.int64), 1)
         k = np.arange(ray.size) - np.repeat(np.cumsum(n) - n, n)
-        near_end = hit[ray] & ((1.0 - k / n[ray]) * length[ray] < _shortening(shorten, ends.shape[0])[ray])
+        to_end = (1.0 - k / n[ray]) * length[ray]
+        near_end = hit[ray] & (to_end < _shortening(shorten, ends.shape[0])[ray])
+        far = ~(hit[ray] & (to_end < _shortening(view_shorten, ends.shape[0])[ray]))
         fr, fc = self.cells(pts)
         free_idx = fr * w + fc
         keep = ~near_end | (self.logodds.reshape(-1)[free_idx] <= 0.0)
-        free_idx, ray = free_idx[keep], ray[keep]
+        free_idx, ray, far = free_idx[keep], ray[keep], far[keep]
         hr, hc = self.cells(ends[hit])
         hit_idx = hr * w + hc
         flat = self.logodds.reshape(-1)
         mark = np.zeros(h * w, dtype=np.int8)
         mark[hit_idx] = 2
-        free_idx, reach = self._stop_misses(free_idx, ray, ~hit, mark, flat)
+        free_idx, reach, far = self._stop_misses(free_idx, ray, ~hit, mark, flat, far)
+        if self.view is not None:  # a return wins over a far crossing in the same scan
+            view = self.view.reshape(-1)
+            view[free_idx[far]] = VIEW_CLEARED
+            view[hit_idx] = VIEW_HIT
         mark[free_idx] = np.maximum(mark[free_idx], 1)  # a hit wins over a pass-through in the same scan
         touched = np.flatnonzero(mark)
         before = flat[touched] > 0.0
@@ -355,20 +412,26 @@ class LogOddsGrid:
 
     @staticmethod
     def _stop_misses(
-        free_idx: np.ndarray, ray: np.ndarray, miss: np.ndarray, mark: np.ndarray, flat: np.ndarray
-    ) -> tuple[np.ndarray, np.ndarray]:
+        free_idx: np.ndarray,
+        ray: np.ndarray,
+        miss: np.ndarray,
+        mark: np.ndarray,
+        flat: np.ndarray,
+        far: np.ndarray,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Drop the samples of return-less rays from their first occupied cell on (occupied in the
         grid or hit by this scan, ``mark == 2``). Samples come ray by ray in order along each ray.
-        Returns the kept flat indices and, per miss ray, the fraction of it kept."""
+        Returns the kept flat indices, per miss ray the fraction of it kept, and ``far`` (a flag per
+        sample) cut the same way."""
         if not miss.any():
-            return free_idx, np.ones(0)
+            return free_idx, np.ones(0), far
         counts = np.bincount(ray, minlength=miss.size)
         k = np.arange(ray.size) - np.repeat(np.cumsum(counts) - counts, counts)
         blocked = miss[ray] & ((mark[free_idx] == 2) | (flat[free_idx] > 0.0))
         first = counts.copy()
         np.minimum.at(first, ray[blocked], k[blocked])
         keep = k < first[ray]
-        return free_idx[keep], (first / np.maximum(counts, 1))[miss]
+        return free_idx[keep], (first / np.maximum(counts, 1))[miss], far[keep]
 
     def insert_scan(
         self,
@@ -376,19 +439,22 @@ class LogOddsGrid:
         points: np.ndarray,
         misses: np.ndarray | None = None,
         shorten: np.ndarray | None = None,
+        view_shorten: np.ndarray | None = None,
     ) -> InsertResult:
         """Integrate one scan: ``points`` (N, 2) returns and optional ``misses`` (M, 2) no-return
         ray ends, both in the sensor frame whose pose in this grid's frame is ``sensor_pose``;
         ``shorten`` (N,): per return, how far short of it its ray stops clearing (see
-        :meth:`insert_rays`)."""
+        :meth:`insert_rays`); ``view_shorten`` likewise for the ``view`` states."""
         ends = sensor_pose.transform_points(points) if len(points) else np.zeros((0, 2))
         hit = np.ones(len(ends), dtype=bool)
-        if shorten is not None and misses is not None and len(misses):
-            shorten = np.concatenate((shorten, np.zeros(len(misses))))
+        if misses is not None and len(misses):
+            pad = np.zeros(len(misses))
+            shorten = None if shorten is None else np.concatenate((shorten, pad))
+            view_shorten = None if view_shorten is None else np.concatenate((view_shorten, pad))
         if misses is not None and len(misses):
             ends = np.vstack((ends, sensor_pose.transform_points(misses)))
             hit = np.concatenate((hit, np.zeros(len(misses), dtype=bool)))
-        return self.insert_rays(np.array([[sensor_pose.x, sensor_pose.y]]), ends, hit, shorten)
+        return self.insert_rays(np.array([[sensor_pose.x, sensor_pose.y]]), ends, hit, shorten, view_shorten)
 
     # -- views ------------------------------------------------------------------------------------
     def probability(self) -> np.ndarray:

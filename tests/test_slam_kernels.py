@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from bench import peers
-from nav.grid import LogOddsGrid, LogOddsOptions
+from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
 from nav.slam import kernels
 from nav.slam.field import LikelihoodField, field_reference
 from nav.slam.matcher import (
@@ -131,15 +131,19 @@ def test_search_with_the_compiled_scores_finds_the_true_pose() -> None:
         assert score > 0.6
 
 
-@pytest.mark.parametrize(("seed", "margin"), [(0, 0.0), (1, 0.0), (2, 0.025)])
-def test_compiled_ray_insertion_equals_the_reference(seed: int, margin: float) -> None:
+@pytest.mark.parametrize(
+    ("seed", "margin", "view_margin"), [(0, 0.0, 0.0), (1, 0.0, 0.025), (2, 0.025, 0.0), (3, 0.025, 0.05)]
+)
+def test_compiled_ray_insertion_equals_the_reference(seed: int, margin: float, view_margin: float) -> None:
     # several scans from different poses, with returns and return-less rays (which stop at
     # occupied cells), into two grids: one per implementation; every result must be identical
-    # (``margin``: the returns' rays are shortened where they grazed their surface)
+    # (``margin``: the returns' rays are shortened where they grazed their surface; ``view_margin``:
+    # the grids keep the view states, the rays' grazing stretches not counting as firm crossings)
     world, res = box_world()
     rng = np.random.default_rng(seed)
-    fast = LogOddsGrid(LogOddsOptions(resolution=0.05))
-    ref = LogOddsGrid(LogOddsOptions(resolution=0.05))
+    track = view_margin > 0.0
+    fast = LogOddsGrid(LogOddsOptions(resolution=0.05), track_view=track)
+    ref = LogOddsGrid(LogOddsOptions(resolution=0.05), track_view=track)
     for k in range(6):
         pose = Pose2D(3.0 + 0.4 * k, 2.0 + 0.2 * k, 0.3 * k)
         pts = cast_scan(world, res, pose, 360, noise=0.01, rng=rng).points()
@@ -149,13 +153,20 @@ def test_compiled_ray_insertion_equals_the_reference(seed: int, margin: float) -
         ends = np.vstack((pose.transform_points(pts), pose.transform_points(misses)))
         hit = np.concatenate((np.ones(len(pts), bool), np.zeros(len(misses), bool)))
         shorten = np.concatenate((grazing_shortening(pts, margin), np.zeros(len(misses))))
-        a = fast.insert_rays(origin, ends, hit, shorten)
-        b = ref.insert_rays_reference(origin, ends, hit, shorten)
+        view_shorten = np.concatenate((grazing_shortening(pts, view_margin), np.zeros(len(misses))))
+        a = fast.insert_rays(origin, ends, hit, shorten, view_shorten)
+        b = ref.insert_rays_reference(origin, ends, hit, shorten, view_shorten)
         assert np.array_equal(a.became_occupied, b.became_occupied)
         assert a.became_free == b.became_free and a.resized == b.resized
         assert np.array_equal(a.miss_reach, b.miss_reach)
         assert np.array_equal(fast.logodds, ref.logodds) and np.array_equal(fast.seen, ref.seen)
+        if track:
+            assert np.array_equal(fast.view, ref.view)
     assert (a.miss_reach < 1.0).any()  # some return-less rays did stop at a wall
+    if track:  # every state occurs: cells last hit, crossed far from a surface, crossed only grazing
+        assert {VIEW_UNSURE, VIEW_CLEARED, VIEW_HIT} <= set(np.unique(fast.view[fast.seen]).tolist())
+    else:
+        assert fast.view is None
 
 
 @pytest.mark.parametrize(("seed", "max_points"), [(0, 100), (1, 100), (2, 200), (3, 100), (4, 6)])

@@ -13,12 +13,26 @@ import math
 
 import numpy as np
 
-from nav.grid import LogOddsGrid, LogOddsOptions
+from nav.grid import VIEW_CLEARED, VIEW_HIT, LogOddsGrid, LogOddsOptions
 from nav.slam.kernels import place_submap
 from nav.types import Pose2D
 
 SubmapLayer = tuple[Pose2D, np.ndarray, np.ndarray, np.ndarray]
 """(submap pose in the map frame, grid origin in the submap frame, log-odds, seen mask)."""
+
+
+def view_logodds(lo: np.ndarray, view: np.ndarray | None, l_occ: float) -> np.ndarray:
+    """A submap's log-odds as the rendered map shows them (a copy), from its grid's ``view`` states
+    (``LogOddsGrid.view``; ``lo`` unchanged where None): a cell whose last firm evidence was a return
+    is at least ``l_occ`` (occupied), one that no ray crossed far from its own surface is at least 0
+    (not free). Rays that meet a face at a few degrees run within half a cell of it for metres,
+    through the cells that straddle it, and outvote the few returns that land in each: the face was
+    drawn free though the cells are mostly wall (issue 16, no ghost free space). Only the display:
+    the matched grids keep the plain evidence."""
+    if view is None:
+        return lo.copy()
+    floor = np.where(view == VIEW_HIT, np.float32(l_occ), np.float32(0.0))
+    return np.where(view == VIEW_CLEARED, lo, np.maximum(lo, floor)).astype(np.float32)
 
 
 def _corners(pose: Pose2D, origin: np.ndarray, shape: tuple[int, int], res: float) -> np.ndarray:

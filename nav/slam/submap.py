@@ -22,10 +22,18 @@ class Submap:
     max_stale_cells: int = 200
     """Rebuild the field once this many cells have turned from occupied to free."""
 
-    def __init__(self, index: int, local_pose: Pose2D, grid_options: LogOddsOptions, sigma: float) -> None:
+    def __init__(
+        self,
+        index: int,
+        local_pose: Pose2D,
+        grid_options: LogOddsOptions,
+        sigma: float,
+        track_view: bool = False,
+    ) -> None:
         self.index = index
         self.local_pose = local_pose
-        self.grid = LogOddsGrid(grid_options)
+        # track_view: the grid also keeps per cell which firm evidence came last (LogOddsGrid.view)
+        self.grid = LogOddsGrid(grid_options, track_view=track_view)
         self.nodes: list[int] = []
         self.finished = False
         self._sigma = sigma
@@ -40,14 +48,16 @@ class Submap:
         points: np.ndarray,
         misses: np.ndarray,
         shorten: np.ndarray | None = None,
+        view_shorten: np.ndarray | None = None,
     ) -> np.ndarray:
         """Insert a scan taken at front-end pose ``node_local``; ``sensor`` is the laser in base_link
         and ``points`` / ``misses`` are in the laser frame; ``shorten``: per point, how far short of
-        it its ray stops clearing (``LogOddsGrid.insert_rays``). Returns ``misses`` shortened to where
+        it its ray stops clearing (``LogOddsGrid.insert_rays``), ``view_shorten`` likewise for the
+        grid's ``view`` states only. Returns ``misses`` shortened to where
         they stopped at a surface this submap holds (``LogOddsGrid.insert_rays``), so the next
         submap, still nearly empty, does not clear past walls this one knows."""
         in_submap = node_local.relative_to(self.local_pose).compose(sensor)
-        change = self.grid.insert_scan(in_submap, points, misses, shorten)
+        change = self.grid.insert_scan(in_submap, points, misses, shorten, view_shorten)
         self.nodes.append(node)
         if self._field is not None:
             self._stale_free += change.became_free

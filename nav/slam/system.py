@@ -40,7 +40,7 @@ from nav.slam.matcher import (
     translation_information,
 )
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
-from nav.slam.render import SubmapLayer, render_submaps
+from nav.slam.render import SubmapLayer, render_submaps, view_logodds
 from nav.slam.submap import Submap
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
@@ -82,6 +82,17 @@ class SlamOptions:
     ghost free space). Why off: at 0.025 the ghost bench's in-wall cells fell 8 / 62 / 51 -> 2 / 48
     / 30 (apartment / office / greenhouse) but FR079 scored 0.0455 m instead of 0.0440 m (Intel
     0.0340, ACES 0.0373; docs/benchmarks.md, stop 30), and the real logs decide."""
+    view_grazing_margin: float = 0.025
+    """The same test for the map users get only (render, save, 3D view), 0 = off: each submap keeps
+    per cell which firm evidence came last (``LogOddsGrid.view``): a return landing there, or a ray
+    crossing it farther than this (m) plus ``range * constraint_rotation_sigma`` (where a heading
+    error of one sigma puts the ray's end across its surface) from the surface it hit; crossings
+    within it (the stretch of :func:`grazing_shortening`, a return without a fitting line taking its
+    angle from its neighbours' segments) do not count. The rendered map shows a cell a return
+    marked last as at least occupied, one no firm crossing reached as at least unknown
+    (:func:`nav.slam.render.view_logodds`); the grids the front end and loop closure match against
+    are the plain log-odds, so trajectories do not change (stop 30's ``grazing_ray_margin`` changed
+    them: FR079 got worse)."""
     minimum_travel_distance: float = 0.1
     """Motion filter: a scan becomes a node after this travel (m); slam_toolbox 0.5, Cartographer 0.2."""
     minimum_travel_heading: float = math.radians(5.0)
@@ -296,19 +307,51 @@ def _dropout_reach(r: np.ndarray, hit: np.ndarray, resolution: float) -> np.ndar
     return np.where(np.isinf(r) & np.isfinite(reach), np.maximum(reach, 0.0), np.inf)
 
 
-def grazing_shortening(pts: np.ndarray, margin: float) -> np.ndarray:
+def grazing_shortening(
+    pts: np.ndarray, margin: float, neighbours: bool = False, heading_sigma: float = 0.0
+) -> np.ndarray:
     """Per return (``pts`` (N, 2) in the laser frame, beam order): how far short of it its ray
     stops clearing, ``margin / sin(a)`` with ``a`` the angle between the beam and the surface it
     hit (the :func:`surface_lines` line through its neighbours; 90 deg, head-on, where there is no
     line: a corner, a post, clutter), at most the whole ray: over that stretch the beam ran within
-    ``margin`` of the surface, through cells the surface may cross."""
+    ``margin`` of the surface, through cells the surface may cross.
+
+    ``neighbours``: where there is no line, the smaller angle between the beam and the segments to
+    the previous and the next return instead of head-on. A face seen at a few degrees from the end
+    of an aisle or a corridor has its returns metres apart, and the seven-return window spans the
+    gap to the beams that went out of range and the opposite face, so no line fits; a single
+    neighbour on the same face still gives its direction. A neighbour on another surface (a depth
+    jump) gives a segment near the beam's direction: that ray counts as grazing, which only keeps
+    the map view from clearing with it (:attr:`SlamOptions.view_grazing_margin`).
+
+    ``heading_sigma`` (rad): the margin grows by ``range * heading_sigma``, how far a heading error
+    of that size moves the ray's end across its surface (a face seen from 5 m is placed to within
+    a few centimetres, not half a cell)."""
     if pts.shape[0] == 0 or margin <= 0.0:
         return np.zeros(pts.shape[0])
     r = np.hypot(pts[:, 0], pts[:, 1])
+    margin = margin + heading_sigma * r
     along, line = surface_lines(pts)
     sin_a = np.abs(pts[:, 0] * np.sin(along) - pts[:, 1] * np.cos(along)) / np.maximum(r, 1e-9)
-    sin_a = np.where(line, sin_a, 1.0)
+    fallback = _neighbour_sin(pts, r) if neighbours else 1.0
+    sin_a = np.where(line, sin_a, fallback)
     return np.minimum(margin / np.maximum(sin_a, margin / np.maximum(r, margin)), r)
+
+
+def _neighbour_sin(pts: np.ndarray, r: np.ndarray) -> np.ndarray:
+    """Per return, the smaller |sin| of the angles between its beam and the segments to the previous
+    and next return (1 where it has neither)."""
+    seg = np.diff(pts, axis=0)
+    length = np.hypot(seg[:, 0], seg[:, 1])
+    cross = np.abs(pts[:-1, 0] * seg[:, 1] - pts[:-1, 1] * seg[:, 0])  # beam i x (p[i+1] - p[i])
+    cross_next = np.abs(pts[1:, 0] * seg[:, 1] - pts[1:, 1] * seg[:, 0])  # beam i+1 x the same
+    ok = length > 1e-9
+    to_next = np.where(ok, cross / np.maximum(r[:-1] * length, 1e-12), 1.0)
+    to_prev = np.where(ok, cross_next / np.maximum(r[1:] * length, 1e-12), 1.0)
+    out = np.ones(pts.shape[0])
+    out[:-1] = to_next
+    out[1:] = np.minimum(out[1:], to_prev)
+    return out
 
 
 def _close(a: Pose2D, b: Pose2D, resolution: float) -> bool:
@@ -466,13 +509,18 @@ class GraphSlam:
         self._last_node_stamp = float(scan.stamp)
         # submap bookkeeping: start a new one when the newest has submap_num_range_data nodes
         if not self._submaps or len(self._submaps[-1].nodes) >= o.submap_num_range_data:
-            sm = Submap(len(self._submaps), local, o.grid_options(), o.likelihood_sigma)
+            sm = Submap(
+                len(self._submaps), local, o.grid_options(), o.likelihood_sigma, o.view_grazing_margin > 0.0
+            )
             self._submaps.append(sm)
             self._submap_global.append(self._correction.compose(local).as_array())
         shorten = grazing_shortening(pts_laser, o.grazing_ray_margin)
+        view_shorten = grazing_shortening(
+            pts_laser, o.view_grazing_margin, neighbours=True, heading_sigma=o.constraint_rotation_sigma
+        )
         for sm in self._submaps[-2:]:  # the older, fuller submap first: it shortens the misses
             if not sm.finished:
-                misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten)
+                misses = sm.insert(index, local, laser_pose, pts_laser, misses, shorten, view_shorten)
                 node.submaps.append(sm.index)
                 if len(sm.nodes) >= 2 * o.submap_num_range_data:
                     sm.finished = True
@@ -888,7 +936,7 @@ class GraphSlam:
             n = len(self._nodes)
             if self._map is not None and self._map_nodes == n:
                 return self._map
-            grids = self._submap_layers()
+            grids = self._submap_layers(view=True)
         grid = render_submaps(grids, self.options.grid_options(), self.options.surface_wins_across_submaps)
         out = grid.to_occupancy_grid()
         with self._lock:
@@ -904,13 +952,15 @@ class GraphSlam:
             grids = self._submap_layers()
         return render_submaps(grids, self.options.grid_options(), surface_wins=False).to_occupancy_grid()
 
-    def _submap_layers(self) -> list[SubmapLayer]:
-        """Copies of the submaps' grids with their map poses (caller holds the lock)."""
+    def _submap_layers(self, view: bool = False) -> list[SubmapLayer]:
+        """Copies of the submaps' grids with their map poses (caller holds the lock); ``view``: the
+        log-odds as users see them (:func:`nav.slam.render.view_logodds`), else the plain evidence."""
+        l_occ = self.options.grid_options().l_occ
         return [
             (
                 Pose2D.from_array(self._submap_global[j]),
                 sm.grid.origin.copy(),
-                sm.grid.logodds.copy(),
+                view_logodds(sm.grid.logodds, sm.grid.view, l_occ) if view else sm.grid.logodds.copy(),
                 sm.grid.seen.copy(),
             )
             for j, sm in enumerate(self._submaps)
