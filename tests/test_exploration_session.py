@@ -352,6 +352,22 @@ def test_a_live_map_rebuild_keeps_what_the_lidar_marked_in_the_local_costmap():
         mapping.start()
         assert _run_until(stack, nav.mapping_live, 30.0)
         s.run_for(2.0)
+        # a screen put up 1 m in front of the robot just now: the lidar marks it at once, the live
+        # map (published once a second) holds it at the earliest from its next publication (the
+        # live map and the costmaps share the map frame's cell lattice, so the lidar's marks of
+        # the room's walls all lie in the map's walls)
+        p = stack.driver.truth_pose
+        ahead = np.array([math.cos(p.theta), math.sin(p.theta)])
+        side = np.array([-ahead[1], ahead[0]])
+        centre = np.array([p.x, p.y]) + 1.0 * ahead
+        screen = [
+            centre + 0.8 * side,
+            centre + 0.8 * side + 0.1 * ahead,
+            centre - 0.8 * side + 0.1 * ahead,
+            centre - 0.8 * side,
+        ]
+        stack.world.add_polygon(np.array(screen))
+        s.run_for(0.3)
         before = nav.local_costmap
         rows, cols = np.nonzero(before.costs == LETHAL_OBSTACLE)
         assert rows.size > 20, "local costmap without the walls the lidar saw"

@@ -99,13 +99,109 @@ def _surface_wins(
     return np.where(surface, best, val), ok | surface
 
 
+def _footprint(layer: SubmapLayer, res: float) -> tuple[np.ndarray, np.ndarray]:
+    """First and one-past-last (col, row) of the map-frame lattice cells (cell k spans
+    [k res, (k + 1) res)) that a layer's grid can cover."""
+    pose, origin, lo, _ = layer
+    c = _corners(pose, origin, lo.shape, res)
+    return (
+        np.floor(c.min(axis=0) / res).astype(np.int64),
+        np.ceil(c.max(axis=0) / res).astype(np.int64),
+    )
+
+
+class _Placed:
+    """Submaps' evidence summed in order on the map-frame lattice: ``acc`` / ``seen`` / ``top``
+    (top: the most occupied single-submap value, kept only for ``surface_wins_across_submaps``)
+    cover the cells from (col, row) ``first`` on."""
+
+    def __init__(self, first: np.ndarray, last: np.ndarray, with_top: bool) -> None:
+        w, h = np.maximum(last - first, 0)
+        self.first = first
+        self.acc = np.zeros((h, w), dtype=np.float32)
+        self.seen = np.zeros((h, w), dtype=bool)
+        self.top = np.zeros((h, w), dtype=np.float32) if with_top else None
+
+    @property
+    def last(self) -> np.ndarray:
+        return self.first + np.array([self.acc.shape[1], self.acc.shape[0]])
+
+    def grown(self, first: np.ndarray, last: np.ndarray) -> _Placed:
+        """A copy covering at least [first, last), the cells outside this one empty."""
+        lo, hi = np.minimum(first, self.first), np.maximum(last, self.last)
+        out = _Placed(lo, hi, self.top is not None)
+        c0, r0 = self.first - lo
+        sub = (slice(r0, r0 + self.acc.shape[0]), slice(c0, c0 + self.acc.shape[1]))
+        out.acc[sub], out.seen[sub] = self.acc, self.seen
+        if out.top is not None:
+            out.top[sub] = self.top
+        return out
+
+    def add(self, layers: list[SubmapLayer], res: float, surface_wins: bool) -> None:
+        """Place cropped layers, in order, inside this sum's cells (callers grow it first).
+        Cell centres are computed from the global cell index, so a cell's value does not depend
+        on which other submaps set the extent (a cached sum and a full render agree exactly)."""
+        for layer in layers:
+            pose, origin, lo, sn = layer
+            f, l_ = _footprint(layer, res)
+            gx = (np.arange(f[0], l_[0]) + 0.5) * res
+            gy = (np.arange(f[1], l_[1]) + 0.5) * res
+            # compiled (kernels.place_submap); the numpy _surface_wins / _lookup are its references
+            val, ok = place_submap(
+                pose.as_array(), origin, lo, sn, gx, gy, res, SURFACE_SAMPLE * res, surface_wins
+            )
+            c0, r0 = f - self.first
+            sub = (slice(r0, r0 + val.shape[0]), slice(c0, c0 + val.shape[1]))
+            self.acc[sub] += val
+            self.seen[sub] |= ok
+            if self.top is not None:
+                self.top[sub] = np.maximum(self.top[sub], val)
+
+    def grid(self, options: LogOddsOptions) -> LogOddsGrid:
+        """The sum as a clamped log-odds grid cut to its observed cells."""
+        res = options.resolution
+        out = LogOddsGrid(LogOddsOptions(**{**options.__dict__, "grow_margin": res}))
+        acc, seen = self.acc, self.seen
+        if self.top is not None:  # (top holds max(0, the most occupied submap value))
+            acc = np.where(self.top > 0.0, np.maximum(acc, self.top), acc)
+        # cut to the observed cells: the corners of rotated submaps span more than they observed
+        rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
+        if not rows.size:
+            return out
+        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
+        out.origin = (self.first + np.array([c0, r0])).astype(float) * res
+        out.logodds = np.clip(acc[r0:r1, c0:c1], options.l_min, options.l_max).astype(np.float32)
+        out.seen = seen[r0:r1, c0:c1].copy()
+        return out
+
+
+def _cropped(layers: list[SubmapLayer], res: float) -> list[SubmapLayer]:
+    return [_crop_to_seen(ly, res) for ly in layers if ly[2].size and ly[3].any()]
+
+
+def _placed(
+    base: _Placed | None, layers: list[SubmapLayer], res: float, with_top: bool, surface_wins: bool
+) -> _Placed:
+    """``base`` (never modified; returned itself when there is nothing to add) with the cropped
+    ``layers`` added after it."""
+    if not layers:
+        return base if base is not None else _Placed(np.zeros(2, np.int64), np.zeros(2, np.int64), with_top)
+    feet = [_footprint(ly, res) for ly in layers]
+    first = np.min([f for f, _ in feet], axis=0)
+    last = np.max([l_ for _, l_ in feet], axis=0)
+    out = base.grown(first, last) if base is not None else _Placed(first, last, with_top)
+    out.add(layers, res, surface_wins)
+    return out
+
+
 def render_submaps(
     layers: list[SubmapLayer],
     options: LogOddsOptions,
     surface_wins_across_submaps: bool = False,
     surface_wins: bool = True,
 ) -> LogOddsGrid:
-    """Sum the submaps' log-odds into one grid in the map frame.
+    """Sum the submaps' log-odds into one grid in the map frame, on the map frame's cell lattice
+    (cell k spans [k res, (k + 1) res): the same cell stays the same as the map grows).
 
     ``surface_wins_across_submaps``: a map cell that any submap holds occupied (its
     :func:`_surface_wins` value above 0: a return landed there more than rays passed) is at least
@@ -116,44 +212,50 @@ def render_submaps(
     without widening its surfaces (what the map-consistency measure reads: it tests the poses, not
     this display rule)."""
     res = options.resolution
-    # one cell of margin: the map's extent is what was observed (a 1 m margin made every saved map
-    # 2 m wider and taller than the building)
-    out = LogOddsGrid(LogOddsOptions(**{**options.__dict__, "grow_margin": res}))
-    layers = [_crop_to_seen(ly, res) for ly in layers if ly[2].size and ly[3].any()]
-    if not layers:
-        return out
-    allc = np.vstack([_corners(p, o, lo.shape, res) for p, o, lo, _ in layers])
-    out.ensure_contains(allc)
-    acc = np.zeros(out.shape, dtype=np.float32)
-    seen = np.zeros(out.shape, dtype=bool)
-    top = np.zeros(out.shape, dtype=np.float32) if surface_wins_across_submaps else None
-    for pose, origin, lo, sn in layers:
-        c = _corners(pose, origin, lo.shape, res)
-        c0 = np.floor((c.min(axis=0) - out.origin) / res).astype(int)
-        c1 = np.ceil((c.max(axis=0) - out.origin) / res).astype(int)
-        c0 = np.maximum(c0, 0)
-        c1 = np.minimum(c1, [out.shape[1], out.shape[0]])
-        cols = np.arange(c0[0], c1[0])
-        rows = np.arange(c0[1], c1[1])
-        gx = out.origin[0] + (cols + 0.5) * res
-        gy = out.origin[1] + (rows + 0.5) * res
-        # compiled (kernels.place_submap); the numpy _surface_wins / _lookup are its references
-        val, ok = place_submap(
-            pose.as_array(), origin, lo, sn, gx, gy, res, SURFACE_SAMPLE * res, surface_wins
-        )
-        sub = (slice(c0[1], c1[1]), slice(c0[0], c1[0]))
-        acc[sub] += val
-        seen[sub] |= ok
-        if top is not None:
-            top[sub] = np.maximum(top[sub], val)
-    if top is not None:  # (top holds max(0, the most occupied submap value))
-        acc = np.where(top > 0.0, np.maximum(acc, top), acc)
-    # cut to the observed cells: the corners of rotated submaps span more than they observed
-    rows, cols = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
-    if rows.size:
-        r0, r1, c0, c1 = rows[0], rows[-1] + 1, cols[0], cols[-1] + 1
-        acc, seen = acc[r0:r1, c0:c1], seen[r0:r1, c0:c1]
-        out.origin = out.origin + np.array([c0, r0], dtype=float) * res
-    out.logodds = np.clip(acc, options.l_min, options.l_max).astype(np.float32)
-    out.seen = seen
-    return out
+    placed = _placed(None, _cropped(layers, res), res, surface_wins_across_submaps, surface_wins)
+    return placed.grid(options)
+
+
+class SubmapRender:
+    """:func:`render_submaps` for a live map published again and again (the same grid, exactly).
+
+    Between pose-graph optimizations only the active submaps change: finished submaps keep their
+    grids and, until the optimizer moves them, their poses. Their placed sum is kept and only the
+    active submaps are placed on top of it; when any kept submap's pose differs, everything is
+    placed again. Submaps are summed in index order in both cases, so the float sums are equal."""
+
+    def __init__(self, options: LogOddsOptions, surface_wins_across_submaps: bool = False) -> None:
+        self.options = options
+        self.across = surface_wins_across_submaps
+        self._kept: _Placed | None = None
+        self._kept_poses = np.zeros((0, 3))
+        self.full_renders = 0
+        """Times the kept sum was rebuilt from the first submap (informational)."""
+
+    def kept(self, poses: np.ndarray) -> int:
+        """How many leading submaps the kept sum can serve, given all submaps' (n, 3) map poses:
+        the caller need not copy those submaps' grids."""
+        k = len(self._kept_poses)
+        if self._kept is None or k > len(poses) or not np.array_equal(poses[:k], self._kept_poses):
+            return 0
+        return k
+
+    def render(self, poses: np.ndarray, finished: int, layers: list[SubmapLayer]) -> LogOddsGrid:
+        """The map of submaps whose (n, 3) map poses are ``poses``; the first ``finished`` of them
+        will not change their grids any more. ``layers``: the submaps from :meth:`kept` (called
+        with the same poses) on, with those poses."""
+        res = self.options.resolution
+        k = self.kept(poses)
+        if k == 0 and len(self._kept_poses):
+            self.full_renders += 1
+        if k == 0:
+            self._kept = None
+        if k > len(poses) - len(layers):
+            raise ValueError("layers must start at the first submap the kept sum does not hold")
+        skip = k - (len(poses) - len(layers))
+        layers = layers[skip:]
+        final = max(finished - k, 0)
+        if final or self._kept is None:
+            self._kept = _placed(self._kept, _cropped(layers[:final], res), res, self.across, True)
+            self._kept_poses = np.array(poses[: k + final], dtype=float).reshape(-1, 3)
+        return _placed(self._kept, _cropped(layers[final:], res), res, self.across, True).grid(self.options)

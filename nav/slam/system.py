@@ -40,7 +40,7 @@ from nav.slam.matcher import (
     translation_information,
 )
 from nav.slam.pose_graph import EdgeSet, PoseGraphOptions, edge_errors, optimize_pose_graph
-from nav.slam.render import SubmapLayer, render_submaps, view_logodds
+from nav.slam.render import SubmapLayer, SubmapRender, render_submaps, view_logodds
 from nav.slam.submap import Submap
 from nav.types import LaserScan, OccupancyGrid, Pose2D, wrap_angle
 
@@ -441,6 +441,8 @@ class GraphSlam:
         """Local loop closures dropped because the optimized graph did not agree with them."""
         self._map: OccupancyGrid | None = None
         self._map_nodes = -1
+        self._render = SubmapRender(o.grid_options(), o.surface_wins_across_submaps)
+        self._render_lock = threading.Lock()  # one map render at a time (it keeps a cached sum)
         self.last_score = float("nan")
         self.odometry_lag = 0.0
         """Odometry-to-laser lag (s) the offline driver corrected (informational)."""
@@ -931,17 +933,24 @@ class GraphSlam:
 
     # -- outputs ------------------------------------------------------------------------------------
     def map(self) -> OccupancyGrid:
-        """The global occupancy grid, re-rendered from the submaps at their latest map poses."""
-        with self._lock:
-            n = len(self._nodes)
-            if self._map is not None and self._map_nodes == n:
-                return self._map
-            grids = self._submap_layers(view=True)
-        grid = render_submaps(grids, self.options.grid_options(), self.options.surface_wins_across_submaps)
-        out = grid.to_occupancy_grid()
-        with self._lock:
-            self._map, self._map_nodes = out, n
-        return out
+        """The global occupancy grid, re-rendered from the submaps at their latest map poses
+        (incrementally: :class:`nav.slam.render.SubmapRender`, equal to
+        :func:`nav.slam.render.render_submaps`)."""
+        with self._render_lock:
+            with self._lock:
+                n = len(self._nodes)
+                if self._map is not None and self._map_nodes == n:
+                    return self._map
+                poses = np.array(self._submap_global, dtype=float).reshape(-1, 3)
+                finished = next(
+                    (j for j, sm in enumerate(self._submaps) if not sm.finished), len(self._submaps)
+                )
+                kept = self._render.kept(poses)
+                layers = self._submap_layers(kept, finished, view=True)
+            out = self._render.render(poses, finished, layers).to_occupancy_grid()
+            with self._lock:
+                self._map, self._map_nodes = out, n
+            return out
 
     def evidence_map(self) -> OccupancyGrid:
         """The submaps placed at their latest map poses by plain nearest-neighbour resampling,
@@ -952,18 +961,22 @@ class GraphSlam:
             grids = self._submap_layers()
         return render_submaps(grids, self.options.grid_options(), surface_wins=False).to_occupancy_grid()
 
-    def _submap_layers(self, view: bool = False) -> list[SubmapLayer]:
-        """Copies of the submaps' grids with their map poses (caller holds the lock); ``view``: the
-        log-odds as users see them (:func:`nav.slam.render.view_logodds`), else the plain evidence."""
+    def _submap_layers(self, first: int = 0, finished: int = 0, view: bool = False) -> list[SubmapLayer]:
+        """The submaps from ``first`` on with their map poses (caller holds the lock); the grids of
+        the first ``finished`` submaps, which no scan changes any more, by reference, the others
+        copied. ``view``: the log-odds as users see them (:func:`nav.slam.render.view_logodds`, always
+        a new array), else the plain evidence."""
         l_occ = self.options.grid_options().l_occ
         return [
             (
                 Pose2D.from_array(self._submap_global[j]),
                 sm.grid.origin.copy(),
-                view_logodds(sm.grid.logodds, sm.grid.view, l_occ) if view else sm.grid.logodds.copy(),
-                sm.grid.seen.copy(),
+                view_logodds(sm.grid.logodds, sm.grid.view, l_occ)
+                if view
+                else (sm.grid.logodds if j < finished else sm.grid.logodds.copy()),
+                sm.grid.seen if j < finished else sm.grid.seen.copy(),
             )
-            for j, sm in enumerate(self._submaps)
+            for j, sm in enumerate(self._submaps[first:], start=first)
         ]
 
     def trajectory(self, sensor: bool = False) -> np.ndarray:
