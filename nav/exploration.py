@@ -11,9 +11,10 @@ frontier:
 (``explore_lite`` names and defaults: potential_scale 3, gain_scale 1, lengths in metres). The
 goal sent for a frontier is its reachable cell nearest to the robot by travel, or, when every
 frontier cell lies too close to a wall for the robot's footprint, the nearest reachable cell within
-``goal_reach`` of the frontier. Cells within ``blacklist_radius`` of a goal that failed are not
-goals (``explore_lite``'s blacklist, per cell): a frontier is skipped only when no other cell can be
-its goal.
+``goal_reach`` of the frontier. Cells within ``blacklist_radius`` of a goal that failed, and of the
+frontier cluster that goal was chosen from (its cells on the map it failed on), are not goals
+(``explore_lite``'s blacklist): a frontier is skipped when none of its cells is left. A frontier that
+grows past the banned cells (the map saw more of it) is a goal again from its new cells.
 
 Pure numpy/scipy over whole grids: no per-cell Python loop; the one loop is over frontiers (tens).
 """
@@ -54,8 +55,9 @@ class FrontierOptions:
     the robot goes to the nearest traversable cell within this distance (m), from where its lidar
     sees past the frontier."""
     blacklist_radius: float = 0.5
-    """Frontier cells within this distance (m) of a failed goal are not goals again; the rest of a
-    long frontier (a room's open side) still is."""
+    """Frontier cells within this distance (m) of a failed goal, or of the cells of the frontier it
+    was chosen from, are not goals again (a short gap in a wall is one frontier: banning a circle
+    around its goal left its next cell a goal, and the gap was visited again and again)."""
     max_attempts: int = 2
     """Goals tried at one place (within ``blacklist_radius``) before it is given up for good: once no
     other frontier is left, places that failed fewer times are forgiven (``forgive``) and tried
@@ -110,6 +112,8 @@ class FrontierReport:
     """Reachable frontiers skipped because every cell that could be their goal is near a failed one."""
     unobservable: list[tuple[float, float]] = field(default_factory=list)
     """Goals of better-ranked frontiers skipped because the robot stands at them already."""
+    unobservable_cells: list[np.ndarray] = field(default_factory=list)
+    """The cells of those frontiers (parallel to ``unobservable``): what the caller blacklists."""
     travel: np.ndarray | None = None
     """The distance field (m) the frontiers were scored with; None when the map had no frontier."""
     geometry: GridGeometry | None = None
@@ -171,9 +175,10 @@ def distance_field(costmap: Costmap, start: Pose2D, cost_travel_multiplier: floa
 class FrontierExplorer:
     """Finds and ranks frontiers; remembers failed goals (the blacklist).
 
-    The blacklist bans *cells*, not frontiers: cells within ``blacklist_radius`` of a failed goal are
-    not goals again, and a frontier keeps its other cells (explore_lite drops the whole frontier,
-    which in a generated office lost whole rooms to one doorway goal that failed)."""
+    The blacklist bans *cells*: those within ``blacklist_radius`` of a failed goal and of the cells
+    its frontier had on the map the goal failed on (explore_lite bans the frontier). Cells the map
+    adds to the frontier later are goals: a room seen further through its doorway is not lost to
+    one goal that failed there, while a gap no reachable spot sees through keeps its cells."""
 
     options: FrontierOptions = field(default_factory=FrontierOptions)
     blacklist: list[tuple[float, float]] = field(default_factory=list)
@@ -181,22 +186,29 @@ class FrontierExplorer:
     """Failures at each blacklist place (parallel to ``blacklist``)."""
     forgiven: list[bool] = field(default_factory=list)
     """Places forgiven by ``forgive`` (their cells are goals again until they fail once more)."""
+    clusters: list[np.ndarray] = field(default_factory=list)
+    """(K, 2) world x, y of the frontier cells banned with each place (K = 0 without a frontier)."""
 
-    def mark_failed(self, goal: tuple[float, float]) -> None:
-        """Ban the cells near ``goal`` as goals (it could not be reached or seen past). A failure near
-        a known place counts as another attempt there."""
+    def mark_failed(self, goal: tuple[float, float], cells: np.ndarray | None = None) -> None:
+        """Ban the cells near ``goal`` and near ``cells`` (the frontier it was chosen from) as goals:
+        it could not be reached or seen past. A failure at a known place (near its goal or its
+        frontier) counts as another attempt there."""
         xy = (float(goal[0]), float(goal[1]))
-        if self.blacklist:
-            b = np.asarray(self.blacklist)
-            d = np.hypot(b[:, 0] - xy[0], b[:, 1] - xy[1])
-            i = int(np.argmin(d))
-            if d[i] <= self.options.blacklist_radius:
+        new = np.empty((0, 2)) if cells is None else np.asarray(cells, dtype=float).reshape(-1, 2)
+        r = self.options.blacklist_radius
+        for i, (place, known) in enumerate(zip(self.blacklist, self.clusters, strict=True)):
+            near = math.hypot(xy[0] - place[0], xy[1] - place[1]) <= r
+            if not near and len(known):
+                near = bool(np.hypot(known[:, 0] - xy[0], known[:, 1] - xy[1]).min() <= r)
+            if near:
                 self.attempts[i] += 1
                 self.forgiven[i] = False
+                self.clusters[i] = np.vstack([known, new])
                 return
         self.blacklist.append(xy)
         self.attempts.append(1)
         self.forgiven.append(False)
+        self.clusters.append(new)
 
     def forgive(self) -> int:
         """Lift the ban on places that failed fewer than ``max_attempts`` times (a goal can fail for
@@ -212,15 +224,31 @@ class FrontierExplorer:
         self.blacklist.clear()
         self.attempts.clear()
         self.forgiven.clear()
+        self.clusters.clear()
 
     @property
     def banned_places(self) -> list[tuple[float, float]]:
         return [xy for xy, f in zip(self.blacklist, self.forgiven, strict=True) if not f]
 
-    def is_banned(self, goal: tuple[float, float]) -> bool:
-        """``goal`` lies within ``blacklist_radius`` of a banned place (as ``find`` bans its cells)."""
+    def banned_mask(self, geo: GridGeometry) -> np.ndarray:
+        """(H, W) bool: cells within ``blacklist_radius`` of a banned goal or of its frontier's cells."""
         r = self.options.blacklist_radius
-        return any(math.hypot(goal[0] - x, goal[1] - y) <= r for x, y in self.banned_places)
+        kept = self._banned_clusters()
+        out = disk_mask(geo, self.banned_places, r)
+        if kept:
+            out |= cells_near_mask(geo, np.vstack(kept), r)
+        return out
+
+    def is_banned(self, goal: tuple[float, float]) -> bool:
+        """``goal`` lies within ``blacklist_radius`` of a banned place or of its frontier's cells (as
+        ``find`` bans cells)."""
+        r = self.options.blacklist_radius
+        if any(math.hypot(goal[0] - x, goal[1] - y) <= r for x, y in self.banned_places):
+            return True
+        return any(np.hypot(c[:, 0] - goal[0], c[:, 1] - goal[1]).min() <= r for c in self._banned_clusters())
+
+    def _banned_clusters(self) -> list[np.ndarray]:
+        return [c for c, f in zip(self.clusters, self.forgiven, strict=True) if not f and len(c)]
 
     def find(self, grid: OccupancyGrid, costmap: Costmap, robot: Pose2D) -> FrontierReport:
         """Frontiers of ``grid`` ranked for a robot at ``robot``; ``costmap`` must share the grid's
@@ -239,13 +267,13 @@ class FrontierExplorer:
         if n == 0:
             return FrontierReport([], None, 0, free_area)
         dist = distance_field(costmap, robot, o.cost_travel_multiplier)
-        banned = disk_mask(geo, self.banned_places, o.blacklist_radius)
+        banned = self.banned_mask(geo)
         sizes = np.bincount(labels.ravel(), minlength=n + 1)[1:]
         keep = np.nonzero(sizes * res >= o.min_frontier_size)[0] + 1
         reach_cells = max(1, math.ceil(o.goal_reach / res))
         objects = ndimage.find_objects(labels)
         frontiers: list[Frontier] = []
-        skipped, unobservable = 0, []
+        skipped, unobservable, unobservable_cells = 0, [], []
         for lab in keep:
             sl = objects[lab - 1]
             assert sl is not None
@@ -261,13 +289,16 @@ class FrontierExplorer:
             # footprint) the reachable cells within reach of it. Only now the disk around it (a
             # Euclidean distance transform of the window: a dilation by a 25 x 25 disk for every
             # frontier took a fifth of the CPU of exploring the office).
-            region = own
-            if _first_reachable(d_win, (own,)) is None:
-                region = ndimage.distance_transform_edt(~own) <= reach_cells
+            # Banned cells are no part of it: a frontier whose cells are all banned has no goal.
+            banned_win = banned[r0:r1, c0:c1]
+            open_own = own & ~banned_win
+            region = open_own
+            if open_own.any() and _first_reachable(d_win, (open_own,)) is None:
+                region = ndimage.distance_transform_edt(~open_own) <= reach_cells
             # The goal: a candidate not near a failed goal; low-cost cells first.
-            allowed = region & ~banned[r0:r1, c0:c1]
+            allowed = region & ~banned_win
             on = _first_reachable(d_win, (allowed & low, allowed))
-            if on is None and _first_reachable(d_win, (region,)) is not None:
+            if on is None and banned_win.any() and _could_reach(d_win, own, reach_cells):
                 skipped += 1  # reachable, but every candidate is near a failed goal
             goal, travel = None, math.inf
             if on is not None:
@@ -285,6 +316,7 @@ class FrontierExplorer:
                 break  # sorted: the rest are unreachable too
             if math.hypot(f.goal[0] - robot.x, f.goal[1] - robot.y) < o.min_goal_distance:
                 unobservable.append(f.goal)  # the robot stands there and does not see past it
+                unobservable_cells.append(f.cells)
                 continue
             chosen = f
             break
@@ -295,6 +327,7 @@ class FrontierExplorer:
             free_area,
             skipped,
             unobservable,
+            unobservable_cells,
             dist,
             geo,
         )
@@ -318,6 +351,31 @@ def disk_mask(geo: GridGeometry, points: list[tuple[float, float]], radius: floa
         near = np.hypot(xy[:, 0] - px, xy[:, 1] - py) <= radius
         out[r0:r1, c0:c1] |= near.reshape(r1 - r0, c1 - c0)
     return out
+
+
+def cells_near_mask(geo: GridGeometry, cells: np.ndarray, radius: float) -> np.ndarray:
+    """(H, W) bool: cells within ``radius`` of any of ``cells`` ((K, 2) world x, y of cell centres;
+    hundreds of them: one distance transform over their bounding window, not a disk per cell)."""
+    out = np.zeros((geo.height, geo.width), dtype=bool)
+    rows, cols = geo.world_to_cell(np.asarray(cells, dtype=float))
+    inside = geo.in_bounds(rows, cols)
+    if not inside.any():
+        return out
+    rows, cols = rows[inside].astype(int), cols[inside].astype(int)
+    k = math.ceil(radius / geo.resolution) + 1
+    r0, r1 = max(int(rows.min()) - k, 0), min(int(rows.max()) + k + 1, geo.height)
+    c0, c1 = max(int(cols.min()) - k, 0), min(int(cols.max()) + k + 1, geo.width)
+    seeds = np.zeros((r1 - r0, c1 - c0), dtype=bool)
+    seeds[rows - r0, cols - c0] = True
+    out[r0:r1, c0:c1] = ndimage.distance_transform_edt(~seeds) * geo.resolution <= radius
+    return out
+
+
+def _could_reach(dist: np.ndarray, own: np.ndarray, reach_cells: int) -> bool:
+    """Would the frontier ``own`` have a goal with no cell banned (its cells, else those in reach)?"""
+    if _first_reachable(dist, (own,)) is not None:
+        return True
+    return _first_reachable(dist, (ndimage.distance_transform_edt(~own) <= reach_cells,)) is not None
 
 
 def _argmin_world(geo: GridGeometry, on: np.ndarray, r0: int, c0: int) -> tuple[float, float]:

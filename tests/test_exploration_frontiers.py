@@ -264,3 +264,48 @@ def test_forgiven_places_are_goals_again_until_they_fail_max_attempts_times():
     assert ex.attempts == [2] and ex.find(grid, cm, robot).chosen is None
     assert ex.forgive() == 0  # given up for good
     assert ex.find(grid, cm, robot).chosen is None
+
+
+def _room_with_patch() -> np.ndarray:
+    """The 6 x 4.5 m room half known (a 4 m frontier at its east side) and an unknown 0.75 x 0.5 m
+    patch in its known part (a second, smaller frontier around it)."""
+    data = _walled_left_known(90)
+    data[60:75, 15:25] = -1
+    return data
+
+
+def test_an_unobservable_goal_bans_its_whole_frontier():
+    # office:1 shuttled between gaps in its outer wall: a circle around each unobservable goal left
+    # the gap's next cell a goal, and each gap was visited 2-4 times
+    grid = _grid(_room_with_patch())
+    cm = _costmap(grid)
+    ex = FrontierExplorer()
+    rep = ex.find(grid, cm, Pose2D(2.1, 2.2))  # at the east frontier, which it does not see past
+    assert len(rep.unobservable) == 1 and len(rep.unobservable_cells) == 1
+    east = rep.unobservable_cells[0]
+    assert len(east) * RES > 4 * ex.options.blacklist_radius  # the frontier is longer than the circle
+    for goal, cells in zip(rep.unobservable, rep.unobservable_cells, strict=True):
+        ex.mark_failed(goal, cells)
+    # a step back: without its cells banned, the long east frontier would be the best pick again
+    nxt = ex.find(grid, cm, Pose2D(1.5, 2.2))
+    assert nxt.chosen is not None and nxt.chosen.goal is not None
+    assert np.hypot(east[:, 0] - nxt.chosen.goal[0], east[:, 1] - nxt.chosen.goal[1]).min() > 0.5
+    assert nxt.chosen.centroid[1] > 2.9  # the patch's frontier
+    assert nxt.blacklisted == 1 and ex.attempts == [1]
+    # a failure on another cell of that frontier is another attempt at the same place
+    ex.mark_failed((float(east[-1, 0]), float(east[-1, 1])))
+    assert ex.attempts == [2]
+
+
+def test_cells_the_map_adds_to_a_banned_frontier_are_goals():
+    # the robot saw further into the room: the frontier moved on, its new cells are not banned
+    grid = _grid(_walled_left_known(90))
+    cm = _costmap(grid)
+    ex = FrontierExplorer()
+    first = ex.find(grid, cm, Pose2D(0.8, 2.2)).chosen
+    assert first is not None and first.goal is not None
+    ex.mark_failed(first.goal, first.cells)
+    assert ex.find(grid, cm, Pose2D(0.8, 2.2)).chosen is None
+    grown = _grid(_walled_left_known(90, known_to=75))
+    moved = ex.find(grown, _costmap(grown), Pose2D(0.8, 2.2)).chosen
+    assert moved is not None and moved.goal is not None and moved.goal[0] > first.goal[0] + 1.0

@@ -294,11 +294,14 @@ def test_a_frontier_is_judged_unobservable_only_on_a_map_published_after_arrival
         arrival, later = nav.live_grid, object()
         ex._arrival_grid = arrival
         here = (s.pose.x, s.pose.y)
-        report = FrontierReport([], None, 0, 1.0, unobservable=[here])
+        cells = np.array([here, (here[0] + 2.0, here[1])])  # the frontier it was chosen from
+        report = FrontierReport([], None, 0, 1.0, unobservable=[here], unobservable_cells=[cells])
         ex._decide(report, arrival, s.pose, s.clock.now())
         assert ex.explorer.blacklist == []
         ex._decide(report, later, s.pose, s.clock.now())
         assert ex.explorer.blacklist == [here]
+        # the whole frontier is banned, not a circle around its goal
+        assert ex.explorer.is_banned((here[0] + 2.0, here[1]))
     finally:
         s.close()
 

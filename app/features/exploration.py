@@ -21,6 +21,7 @@ import threading
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from enum import StrEnum
+from itertools import zip_longest
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -109,6 +110,8 @@ class Exploration:
         self._ended: float | None = None
         self._request: int | None = None  # the navigation request of the current goal
         self._goal: tuple[float, float] | None = None
+        self._goal_cells: np.ndarray | None = None
+        """The cells of the frontier ``_goal`` was chosen from: blacklisted with it when it fails."""
         self._best_travel = math.inf  # the least field travel to the goal seen so far, and when
         self._progress_at = 0.0
         self._arrival_grid: Any = None  # the map when a goal was reached: too old to judge it by
@@ -247,7 +250,7 @@ class Exploration:
                 self.goals_reached += 1
             elif kind == "failed" and self._goal is not None:
                 self.goals_failed += 1
-                self.explorer.mark_failed(self._goal)
+                self.explorer.mark_failed(self._goal, self._goal_cells)
                 self.session.add_event(
                     "exploration",
                     status="frontier blacklisted",
@@ -285,8 +288,9 @@ class Exploration:
         # The robot stands there and still does not see past it -- judged on a map SLAM published
         # after it arrived (the one of the arrival tick does not hold what it sees from there yet).
         if grid is not self._arrival_grid:
-            for goal in report.unobservable:
-                self.explorer.mark_failed(goal)
+            # (a report without the frontiers' cells bans circles around the goals alone)
+            for goal, cells in zip_longest(report.unobservable, report.unobservable_cells):
+                self.explorer.mark_failed(goal, cells)
                 self.session.add_event("exploration", status="frontier unobservable", goal=list(goal))
         self._frontier_points = self._sample(report)
         if self._request is not None and self._goal is not None and self._goal_still_frontier(report):
@@ -317,14 +321,14 @@ class Exploration:
         try:
             rid = self.navigation.set_goals([target], actor="explorer")
         except (ValueError, RuntimeError) as exc:  # GoalRejected / NavigationRefused: try another
-            self.explorer.mark_failed(chosen.goal)
+            self.explorer.mark_failed(chosen.goal, chosen.cells)
             self.goals_failed += 1
             self._need_eval = True
             self.session.add_event(
                 "exploration", status="goal refused", goal=list(chosen.goal), reason=str(exc)
             )
             return
-        self._request, self._goal = rid, chosen.goal
+        self._request, self._goal, self._goal_cells = rid, chosen.goal, chosen.cells
         self._best_travel, self._progress_at = chosen.travel, now
         self.goals_sent += 1
         self.session.add_event(
@@ -345,9 +349,9 @@ class Exploration:
 
     def _give_up_goal(self, reason: str) -> None:
         assert self._goal is not None
-        goal = self._goal
+        goal, cells = self._goal, self._goal_cells
         self._cancel_goal()
-        self.explorer.mark_failed(goal)
+        self.explorer.mark_failed(goal, cells)
         self.goals_failed += 1
         self.session.add_event("exploration", status="frontier blacklisted", goal=list(goal), reason=reason)
 
