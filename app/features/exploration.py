@@ -21,7 +21,6 @@ import threading
 from concurrent.futures import Future
 from dataclasses import dataclass, field
 from enum import StrEnum
-from itertools import zip_longest
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -288,8 +287,7 @@ class Exploration:
         # The robot stands there and still does not see past it -- judged on a map SLAM published
         # after it arrived (the one of the arrival tick does not hold what it sees from there yet).
         if grid is not self._arrival_grid:
-            # (a report without the frontiers' cells bans circles around the goals alone)
-            for goal, cells in zip_longest(report.unobservable, report.unobservable_cells):
+            for goal, cells in zip(report.unobservable, report.unobservable_cells, strict=True):
                 self.explorer.mark_failed(goal, cells)
                 self.session.add_event("exploration", status="frontier unobservable", goal=list(goal))
         self._frontier_points = self._sample(report)
