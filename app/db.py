@@ -10,6 +10,8 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from alembic import command
+from alembic.config import Config
 from sqlalchemy import event
 from sqlalchemy.engine import Engine
 from sqlmodel import Session, create_engine
@@ -37,8 +39,6 @@ def make_engine(url: str) -> Engine:
 
 
 def alembic_config(engine: Engine):
-    from alembic.config import Config
-
     cfg = Config()
     cfg.set_main_option("script_location", str(ALEMBIC_DIR))
     cfg.set_main_option("sqlalchemy.url", engine.url.render_as_string(hide_password=False).replace("%", "%%"))
@@ -59,8 +59,6 @@ def _serialize_migrations(conn) -> None:
 
 def migrate(engine: Engine, revision: str = "head") -> None:
     """Upgrade the database to ``revision`` (default: the newest); safe to run concurrently."""
-    from alembic import command
-
     cfg = alembic_config(engine)
     with engine.begin() as conn:
         _serialize_migrations(conn)
@@ -69,8 +67,6 @@ def migrate(engine: Engine, revision: str = "head") -> None:
 
 
 def downgrade(engine: Engine, revision: str = "base") -> None:
-    from alembic import command
-
     cfg = alembic_config(engine)
     with engine.begin() as conn:
         _serialize_migrations(conn)

@@ -5,10 +5,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from pathlib import Path
 
+from maps.mapio import MapFormatError
+from maps.stock import available_worlds, stock_world_path
 from nav.types import OccupancyGrid, Pose2D
 from robot.base import Driver
 from robot.clock import Clock
 from robot.profiles import RobotProfile
+from robot.serial.driver import SerialDriver, SerialError, parse_serial_url
+from robot.sim import SimDriver, World, WorldError
 
 
 class DriverConfigError(ValueError):
@@ -27,8 +31,6 @@ class DriverBundle:
 
 
 def resolve_world(world: str) -> Path:
-    from maps.stock import available_worlds, stock_world_path
-
     path = Path(world)
     if path.suffix in (".yaml", ".yml"):
         if not path.is_file():
@@ -44,9 +46,6 @@ def resolve_world(world: str) -> Path:
 
 def make_driver(robot: str, profile: RobotProfile, world: str, clock: Clock, seed: int = 0) -> DriverBundle:
     if robot == "sim":
-        from maps.mapio import MapFormatError
-        from robot.sim import SimDriver, World, WorldError
-
         path = resolve_world(world)
         try:
             sim_world = World.from_yaml(path)
@@ -56,8 +55,6 @@ def make_driver(robot: str, profile: RobotProfile, world: str, clock: Clock, see
         driver = SimDriver(sim_world, profile, clock, seed=seed, start_pose=start)
         return DriverBundle(driver, sim_world.grid, start, path.stem)
     if robot.startswith("serial://"):
-        from robot.serial.driver import SerialDriver, SerialError, parse_serial_url
-
         try:
             opts = parse_serial_url(robot)
             driver = SerialDriver.from_url_options(opts, profile, clock)

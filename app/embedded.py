@@ -9,6 +9,9 @@ import time
 from collections.abc import Iterator
 from dataclasses import dataclass
 
+import uvicorn
+
+from app.main import UVICORN_OPTIONS, create_app
 from app.runtime import Runtime
 from app.settings import Settings
 
@@ -31,10 +34,6 @@ def serve_in_thread(
 ) -> Iterator[EmbeddedServer]:
     """``send_buffer``: SO_SNDBUF for the listening socket, which accepted connections inherit
     (tests of stalled clients: the kernel's autotuned ~2 MB takes ~40 s of telemetry to fill)."""
-    import uvicorn
-
-    from app.main import UVICORN_OPTIONS, create_app
-
     runtime = runtime or Runtime.build(settings)
     app = create_app(runtime)
     sock = socket.socket()

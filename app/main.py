@@ -17,7 +17,12 @@ from fastapi.staticfiles import StaticFiles
 import app.api.routes as routes_pkg
 from app.api.problems import install as install_problems
 from app.api_docs import mount_api_docs
+from app.auth import UserStore
+from app.hardening import HardeningMiddleware
+from app.ratelimit import document_rate_limits
 from app.runtime import Runtime
+from app.security import LEASE_RULES, AuthContext, LeaseGuard, SecurityMiddleware, make_viz_authorize
+from app.viewer.relay import make_router
 
 FRONTEND_DIR = Path(__file__).resolve().parent.parent / "frontend"
 
@@ -53,10 +58,6 @@ async def _sweep_leases(guard, period: float = 1.0) -> None:
 
 
 def create_app(runtime: Runtime) -> FastAPI:
-    from app.auth import UserStore
-    from app.hardening import HardeningMiddleware
-    from app.security import LEASE_RULES, AuthContext, LeaseGuard, SecurityMiddleware, make_viz_authorize
-
     settings = runtime.settings
     guard = LeaseGuard(runtime.lease, runtime.session, idle_s=settings.lease_idle_s)
     auth = AuthContext(
@@ -93,8 +94,6 @@ def create_app(runtime: Runtime) -> FastAPI:
     for module in _route_modules():
         app.include_router(module.router)
 
-    from app.ratelimit import document_rate_limits
-
     document_rate_limits(app)  # 429 on the control endpoints (limited in app.security)
 
     mount_api_docs(app)
@@ -102,8 +101,6 @@ def create_app(runtime: Runtime) -> FastAPI:
     @app.get("/favicon.ico", include_in_schema=False)
     def favicon() -> FileResponse:  # what browsers ask for on pages without a <link rel="icon"> (/viz/)
         return FileResponse(FRONTEND_DIR / "favicon.svg", media_type="image/svg+xml")
-
-    from app.viewer.relay import make_router
 
     app.include_router(
         make_router(lambda: runtime.viewer, make_viz_authorize(auth.require_auth), enabled=settings.viewer)

@@ -12,10 +12,14 @@ from sqlalchemy.engine import Engine
 from app.control import ControlLease
 from app.db import make_engine, migrate
 from app.drivers import DriverBundle, make_driver
+from app.features import discover
 from app.map_store import MapStore
 from app.robots import register_robot
 from app.session import Session, SessionOptions
 from app.settings import Settings
+from app.viewer.scene import Viewer
+from maps.mapio import load_map_yaml
+from maps.stock import available_worlds, stock_world_path
 from nav.types import Pose2D
 from robot.clock import Clock, RealClock
 from robot.profiles import RobotProfile, load_profile
@@ -63,14 +67,10 @@ class Runtime:
         return cls(settings, profile, engine, maps, session, world_name=bundle.world_name, robot_id=robot_id)
 
     def start(self) -> None:
-        from app.features import discover
-
         for module in discover():
             self.features[module.__name__.rsplit(".", 1)[-1]] = module.setup(self)
         self.session.start()
         if self.settings.viewer:
-            from app.viewer.scene import Viewer
-
             self.viewer = Viewer(
                 self.session.bus, footprint=self.profile.footprint_polygon(), on_pose_input=self.on_pose_input
             )
@@ -118,9 +118,6 @@ class Runtime:
 
 
 def _register_stock_maps(maps: MapStore) -> None:
-    from maps.mapio import load_map_yaml
-    from maps.stock import available_worlds, stock_world_path
-
     maps.register_stock({name: stock_world_path(name) for name in available_worlds()}, load_map_yaml)
 
 

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import json
 import logging
 import re
 import secrets
@@ -467,8 +468,6 @@ class SecurityMiddleware:
 
 async def _respond(send: Send, status: int, body: dict | None, headers: list) -> None:
     """Answer from the middleware; a refusal is a problem-details body like every route's error."""
-    import json
-
     if body is None:
         data, ctype = b"", b"application/json"
     else:

@@ -23,6 +23,7 @@ import re
 from dataclasses import dataclass
 from pathlib import Path
 
+import imageio.v3 as iio
 import numpy as np
 
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
@@ -258,8 +259,6 @@ def decode_png(data: bytes, max_pixels: int = DEFAULT_MAX_PIXELS) -> tuple[np.nd
             raise MapFormatError(f"PNG is {w} x {h} = {w * h} pixels, more than the limit of {max_pixels}")
     else:
         raise MapFormatError("not a PNG image (bad signature)")
-    import imageio.v3 as iio
-
     try:
         img = np.asarray(iio.imread(io.BytesIO(data), extension=".png", plugin="pillow"))
     except Exception as exc:  # imageio raises many types for corrupt files

@@ -32,9 +32,13 @@ from typing import Any, Literal, Protocol
 import numpy as np
 
 from nav.control import Controller, reset_patience
+from nav.control.dwa import DwaController
 from nav.control.errors import ControllerError, NoValidControl, PatienceExceeded
 from nav.control.goal_checker import GoalChecker
+from nav.control.options import DwaOptions
 from nav.control.progress_checker import ProgressChecker
+from nav.control.teb import TebController
+from nav.control.teb_options import TebOptions
 from nav.planning.errors import NoValidPathFound, PlannerError
 from nav.types import LETHAL_OBSTACLE, ZERO_TWIST, Costmap, Path, Pose2D, Twist2D
 
@@ -660,13 +664,7 @@ def make_controller(name: str, profile: Any, **overrides: Any) -> Controller:
     ``overrides`` (fields of ``DwaOptions`` / ``TebOptions``)."""
     check_controller_name(name)
     if name == "teb":
-        from nav.control.teb import TebController
-        from nav.control.teb_options import TebOptions
-
         return TebController(TebOptions.for_robot(profile, **overrides))
-    from nav.control.dwa import DwaController
-    from nav.control.options import DwaOptions
-
     return DwaController(DwaOptions.for_robot(profile, **overrides))
 
 

@@ -36,6 +36,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from app.modes import Mode
+from nav.slam.system import GraphSlam
 from nav.types import LaserScan, OccupancyGrid, Pose2D
 
 if TYPE_CHECKING:
@@ -165,8 +166,6 @@ class Mapping:
             self._begin()
 
     def _begin(self) -> None:
-        from nav.slam.system import GraphSlam
-
         if self.interrupted and self.slam is not None:
             with self._lock:
                 self.interrupted = False

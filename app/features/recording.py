@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING
 from app.recorder import Recorder
 from app.runs.replay import ReplayPlayer
 from app.runs.store import RunsStore
+from app.viewer.scene import Viewer
 
 if TYPE_CHECKING:
     from app.runtime import Runtime
@@ -55,8 +56,6 @@ class Recording:
             if self._replay is None:
                 player = ReplayPlayer(self.store, footprint=self.runtime.profile.footprint_polygon())
                 if self.runtime.settings.viewer:
-                    from app.viewer.scene import Viewer
-
                     player.viewer = Viewer(player.bus)
                     player.viewer.start()
                 self._replay = player

@@ -11,8 +11,13 @@ import threading
 import time
 
 import numpy as np
+import uvicorn
+from fastapi import FastAPI
+from scipy.ndimage import distance_transform_edt
 
 from app.bus import Snapshot, SnapshotBus
+from app.viewer.relay import make_router
+from app.viewer.scene import Viewer
 from nav.types import Costmap, GridGeometry, LaserScan, OccupancyGrid, Path, Pose2D, Twist2D, wrap_angle
 
 
@@ -53,8 +58,6 @@ def march_scan(grid: OccupancyGrid, pose: Pose2D, beams: int = 360, range_max: f
 
 def local_costmap(grid: OccupancyGrid, pose: Pose2D, size: int = 60) -> Costmap:
     """A rolling 3 x 3 m window: lethal where the map is occupied, a linear inflation ramp around it."""
-    from scipy.ndimage import distance_transform_edt
-
     res = grid.resolution
     ox = math.floor((pose.x - size * res / 2) / res) * res
     oy = math.floor((pose.y - size * res / 2) / res) * res
@@ -73,12 +76,6 @@ def local_costmap(grid: OccupancyGrid, pose: Pose2D, size: int = 60) -> Costmap:
 
 
 def main() -> None:
-    import uvicorn
-    from fastapi import FastAPI
-
-    from app.viewer.relay import make_router
-    from app.viewer.scene import Viewer
-
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--port", type=int, default=8765)
     ap.add_argument("--host", default="127.0.0.1")

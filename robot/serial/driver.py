@@ -48,6 +48,7 @@ from robot.serial.protocol import (
     Telemetry,
     VelocityCommand,
 )
+from robot.serial.rplidar import RPLidar, RPLidarOptions
 
 log = logging.getLogger(__name__)
 
@@ -514,8 +515,6 @@ class SerialDriver:
         self._lidar = None
         self.has_lidar = bool(opts.lidar_port)
         if opts.lidar_port:
-            from robot.serial.rplidar import RPLidar, RPLidarOptions
-
             try:
                 self._lidar = RPLidar(
                     opts.lidar_port,

@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import threading
 from collections.abc import Callable
+from dataclasses import replace
 
 from nav.types import Pose2D, Twist2D
 from robot.base import SensorFrame
 from robot.clock import RealClock
 from robot.profiles import RobotProfile
+from robot.sim import SimDriver, World
 
 
 class SimPump:
@@ -39,8 +41,6 @@ class SimPump:
         rate_hz: float = 200.0,
     ) -> SimPump:
         """A pump over a fresh ``SimDriver`` in a stock world (``box`` = a 6 x 4 m empty room)."""
-        from robot.sim import SimDriver, World
-
         world = World.box(6.0, 4.0) if world_name == "box" else World.stock(world_name)
         return cls(SimDriver(world, profile, RealClock(), seed=seed, start_pose=start_pose), rate_hz)
 
@@ -66,8 +66,6 @@ class SimPump:
     def set_ir_stop(self, enabled: bool) -> None:
         """The firmware's IR interrupt is modelled in the simulator's physics substeps (it cuts the
         motors between control ticks, as an interrupt does); this switches it."""
-        from dataclasses import replace
-
         with self._lock:
             self.sim.options = replace(self.sim.options, ir_stop=enabled)
 

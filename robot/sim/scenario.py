@@ -39,6 +39,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from robot.sim.people import MAX_SPEED, MIN_SPEED
+
 if TYPE_CHECKING:
     from robot.sim.world import World
 
@@ -122,8 +124,6 @@ def _point(value: Any, where: str) -> tuple[float, float]:
 
 def parse_scenario(data: dict[str, Any], source: str = "scenario") -> Scenario:
     """Validate a parsed TOML document into a ``Scenario``."""
-    from robot.sim.people import MAX_SPEED, MIN_SPEED
-
     unknown = set(data) - {"description", "person", *OBSTACLE_KINDS}
     if unknown:
         raise ScenarioError(f"{source}: unknown key(s) {', '.join(sorted(unknown))}")

@@ -13,9 +13,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+from scipy.ndimage import distance_transform_edt
 
+from maps.mapio import load_map_yaml, read_map_metadata
+from maps.stock import stock_world_path
 from nav.raycast import RayCaster
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
+from robot.sim.people import Crowd
+from robot.sim.scenario import load_scenario, sidecar_path
 
 
 class WorldError(ValueError):
@@ -72,8 +77,6 @@ class World:
         self.static_occupied = occ
         self._caster: RayCaster | None = None
         self._clearance: np.ndarray | None = None
-        from robot.sim.people import Crowd
-
         self.people = Crowd(self)
         self.features: list[tuple[str, np.ndarray]] = []  # (kind, polygon) added by a scenario
         self._occ_cache: tuple[int, np.ndarray] | None = None
@@ -92,8 +95,6 @@ class World:
         """(H, W) metres from each cell centre to the nearest statically occupied cell centre
         (Euclidean distance transform, computed once per static world state; people excluded)."""
         if self._clearance is None:
-            from scipy.ndimage import distance_transform_edt
-
             occ = self.static_occupied
             if occ.any():
                 self._clearance = distance_transform_edt(~occ) * self.geometry.resolution
@@ -162,12 +163,8 @@ class World:
         ``scenario``: True loads the sidecar ``<stem>.scenario.toml`` next to the YAML (people,
         mounds, puddles; see ``robot.sim.scenario``), a path loads that file. Off by default so the
         simulated world matches its map unless a scenario is asked for."""
-        from maps.mapio import load_map_yaml, read_map_metadata
-
         path = Path(path)
         if scenario:
-            from robot.sim.scenario import load_scenario, sidecar_path
-
             spec = load_scenario(sidecar_path(path) if scenario is True else Path(scenario))  # type: ignore[arg-type]
             world = cls.from_yaml(path, **kwargs)
             spec.apply(world)
@@ -183,8 +180,6 @@ class World:
     def stock(cls, name: str, scenario: bool = False, **kwargs: object) -> World:
         """One of the stock worlds in ``maps/stock`` (apartment, office, greenhouse); ``scenario``
         adds its people and obstacles from ``maps/stock/<name>.scenario.toml``."""
-        from maps.stock import stock_world_path
-
         return cls.from_yaml(stock_world_path(name), scenario=scenario, **kwargs)
 
     @classmethod

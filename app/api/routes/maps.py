@@ -20,6 +20,9 @@ from app.features.localization import map_fit
 from app.features.recording import current_map_id
 from app.map_store import MapInfo
 from app.modes import Mode
+from maps.mapio import DEFAULT_MAX_PIXELS, MapFormatError, encode_pgm, encode_yaml, read_map_bytes
+from maps.png import encode_png
+from maps.render import grid_to_grey
 from nav.types import OccupancyGrid
 
 router = APIRouter(tags=["maps"])
@@ -138,8 +141,6 @@ def _attachment(filename: str) -> dict[str, str]:
     responses={**NOT_FOUND, 200: {"content": {"application/x-yaml": {}}}},
 )
 def export_yaml(map_id: DbId, rt: RuntimeDep) -> Response:
-    from maps.mapio import encode_yaml
-
     body = encode_yaml(_grid(rt, map_id), PGM_NAME)
     return Response(body, media_type="application/x-yaml", headers=_attachment(YAML_NAME))
 
@@ -151,8 +152,6 @@ def export_yaml(map_id: DbId, rt: RuntimeDep) -> Response:
     responses={**NOT_FOUND, 200: {"content": {"image/x-portable-graymap": {}}}},
 )
 def export_pgm(map_id: DbId, rt: RuntimeDep) -> Response:
-    from maps.mapio import encode_pgm
-
     body = encode_pgm(_grid(rt, map_id))
     return Response(body, media_type="image/x-portable-graymap", headers=_attachment(PGM_NAME))
 
@@ -164,9 +163,6 @@ def export_pgm(map_id: DbId, rt: RuntimeDep) -> Response:
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
 def full_image(map_id: DbId, rt: RuntimeDep) -> Response:
-    from maps.png import encode_png
-    from maps.render import grid_to_grey
-
     png = encode_png(grid_to_grey(_grid(rt, map_id)))
     return Response(png, media_type="image/png", headers={"Cache-Control": "max-age=60"})
 
@@ -212,8 +208,6 @@ async def import_map(
     image: Annotated[UploadFile, File(description="the PGM or PNG the YAML describes")],
     name: Annotated[str | None, Form(max_length=200, description="default: the YAML's file name")] = None,
 ):
-    from maps.mapio import DEFAULT_MAX_PIXELS, MapFormatError, read_map_bytes
-
     limit = rt.settings.max_upload_bytes
     yaml_bytes = await yaml.read(limit + 1)
     image_bytes = await image.read(limit + 1)

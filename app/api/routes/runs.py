@@ -16,9 +16,17 @@ from app.api.deps import RuntimeDep, StrictModel, get_runtime
 from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, OpenOut, Out, Page, Pair, Timestamp, Triple
 from app.export.data import RunData, load_run
+from app.export.mcap import mcap_bytes
+from app.export.tabular import run_json, samples_columns, samples_csv
+from app.runs.codec import MODES
 from app.runs.importer import BagImports, ImportInputError, ImportJob
+from app.runs.replay import ReplayError
 from app.runs.store import KINDS, OUTCOMES, RunFilters, RunNotFound, RunsStore, utc_aware
 from app.runtime import Runtime
+from app.viewer.relay import CLIENT_HTML, relay_to_viewer
+from maps.png import encode_png
+from maps.render import grid_to_grey
+from nav.types import Pose2D
 
 router = APIRouter(tags=["runs"])
 
@@ -292,8 +300,6 @@ def trajectory(
     t1: Annotated[float | None, Query(allow_inf_nan=False)] = None,
     max_points: Annotated[int, Query(ge=2, le=100_000)] = 5000,
 ) -> dict:
-    from app.export.tabular import samples_columns
-
     _found(store.run, run_id)
     samples, labels = store.samples(run_id, t0, t1)
     step = max(1, -(-samples.shape[0] // max_points))
@@ -319,9 +325,6 @@ def trajectory(
     responses={**NOT_FOUND, 200: {"content": {"image/png": {}}}},
 )
 def run_map_png(run_id: DbId, store: StoreDep) -> Response:
-    from maps.png import encode_png
-    from maps.render import grid_to_grey
-
     _found(store.run, run_id)
     hit = store.grid_at(run_id)
     if hit is None:
@@ -338,8 +341,6 @@ def run_map_png(run_id: DbId, store: StoreDep) -> Response:
 def state_at(
     run_id: DbId, store: StoreDep, t: Annotated[float, Query(ge=0, allow_inf_nan=False)] = 0.0
 ) -> dict:
-    from app.runs.codec import MODES
-
     _found(store.run, run_id)
     row, labels = store.sample_at(run_id, t)
     if row is None:
@@ -354,8 +355,6 @@ def state_at(
     }
     scan = store.scan_at(run_id, t)
     if scan is not None:
-        from nav.types import Pose2D
-
         pose = Pose2D(*out["pose"])
         summary = store.run(run_id)["summary"]
         laser = Pose2D(*(summary.get("laser_pose") or [0.0, 0.0, 0.0])[:3])
@@ -375,8 +374,6 @@ def state_at(
     responses={**NOT_FOUND, 200: {"content": {"application/octet-stream": {}}, "headers": PARTIAL}},
 )
 def export_mcap(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
-    from app.export.mcap import mcap_bytes
-
     data = _load(store, run_id, rt)
     return Response(mcap_bytes(data), media_type="application/octet-stream", headers=_headers(data, "mcap"))
 
@@ -403,8 +400,6 @@ def export_mcap(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
     },
 )
 def export_json(run_id: DbId, store: StoreDep, rt: RuntimeDep, scans: bool = False) -> JSONResponse:
-    from app.export.tabular import run_json
-
     data = _load(store, run_id, rt)
     return JSONResponse(run_json(data, with_scans=scans), headers=_headers(data, "json"))
 
@@ -417,8 +412,6 @@ def export_json(run_id: DbId, store: StoreDep, rt: RuntimeDep, scans: bool = Fal
     responses={**NOT_FOUND, 200: {"content": {"text/csv": {}}, "headers": PARTIAL}},
 )
 def export_csv(run_id: DbId, store: StoreDep, rt: RuntimeDep) -> Response:
-    from app.export.tabular import samples_csv
-
     data = _load(store, run_id, rt)
     return Response(samples_csv(data), media_type="text/csv", headers=_headers(data, "csv"))
 
@@ -475,8 +468,6 @@ def replay_state(rt: RuntimeDep) -> dict:
     responses={**NOT_FOUND, **ERRORS(s409="the player refused (no run loaded...)"), **NO_RECORDING},
 )
 def replay_control(cmd: ReplayCommand, rt: RuntimeDep) -> dict:
-    from app.runs.replay import ReplayError
-
     player = _recording(rt).replay
     try:
         if cmd.action == "load":
@@ -508,16 +499,12 @@ def _body_error(field: str, msg: str) -> RequestValidationError:
 
 @router.get("/replay/viz/", include_in_schema=False)
 async def replay_viz_index() -> FileResponse:
-    from app.viewer.relay import CLIENT_HTML
-
     return FileResponse(CLIENT_HTML, media_type="text/html")
 
 
 @router.websocket("/replay/viz")
 async def replay_viz_ws(ws: WebSocket) -> None:
     """The replay viewer's viser websocket, relayed like the live one (app/viewer/relay.py)."""
-    from app.viewer.relay import relay_to_viewer
-
     rec = ws.app.state.runtime.features.get("recording")
     player = None if rec is None else rec.replay_if_started
     await relay_to_viewer(ws, None if player is None else player.viewer)
