@@ -6,12 +6,14 @@ import dataclasses
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 from sqlalchemy.engine import Engine
 
 from app.control import ControlLease
 from app.db import make_engine, migrate
 from app.drivers import DriverBundle, make_driver
+from app.errors import FeatureUnavailable
 from app.features import discover
 from app.map_store import MapStore
 from app.robots import register_robot
@@ -26,6 +28,8 @@ from robot.profiles import RobotProfile, load_profile
 
 log = logging.getLogger("navdeck")
 
+FeatureT = TypeVar("FeatureT")
+
 
 @dataclass
 class Runtime:
@@ -38,9 +42,21 @@ class Runtime:
     viewer: object | None = None
     world_name: str | None = None
     robot_id: int | None = None  # this robot's row in the robots table (app/robots.py)
+    active_map_id: int | None = None  # the map set by localization or activation (None: the world's)
     features: dict[str, object] = field(default_factory=dict)  # feature module name -> its handle
     # What a click-and-drag in the 3D view does, by kind ("goal", "initial_pose"); set by features.
     pose_input_handlers: dict[str, Callable[[Pose2D], None]] = field(default_factory=dict)
+
+    def find_feature(self, kind: type[FeatureT]) -> FeatureT | None:
+        """The running feature of this type, or None when this server did not set it up."""
+        return next((handle for handle in self.features.values() if isinstance(handle, kind)), None)
+
+    def feature(self, kind: type[FeatureT]) -> FeatureT:
+        """The running feature of this type; ``FeatureUnavailable`` (the API's 503) without it."""
+        found = self.find_feature(kind)
+        if found is None:
+            raise FeatureUnavailable(kind)
+        return found
 
     @classmethod
     def build(cls, settings: Settings, clock: Clock | None = None) -> Runtime:

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from typing import Annotated
+from collections.abc import Callable
+from typing import Annotated, TypeVar
 
 from fastapi import Depends, Request, WebSocket
 from pydantic import BaseModel, ConfigDict
@@ -30,6 +31,18 @@ def get_runtime_ws(websocket: WebSocket) -> Runtime:
 
 
 RuntimeDep = Annotated[Runtime, Depends(get_runtime)]
+
+FeatureT = TypeVar("FeatureT")
+
+
+def feature_dependency(kind: type[FeatureT]) -> Callable[[Runtime], FeatureT]:
+    """A route dependency giving the running feature of this type. A server without it answers 503
+    (``FeatureUnavailable``, turned into a problem by ``app.api.problems``), in this one place."""
+
+    def running_feature(rt: RuntimeDep) -> FeatureT:
+        return rt.feature(kind)
+
+    return running_feature
 
 
 def get_actor(request: Request) -> str:

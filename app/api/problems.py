@@ -20,6 +20,8 @@ from fastapi.responses import JSONResponse
 from pydantic import BaseModel, ConfigDict, Field
 from starlette.exceptions import HTTPException as StarletteHTTPException
 
+from app.errors import FeatureUnavailable
+
 PROBLEM_MEDIA_TYPE = "application/problem+json"
 PROBLEM_BASE = "https://navdeck.dev/problems/"
 """Problem ``type`` URIs are this base + a slug; they name the kind of error, not a page to fetch."""
@@ -127,6 +129,11 @@ async def _handle(request: Request, exc: Exception) -> JSONResponse:
     return problem(exc.status, exc.detail, kind=exc.kind, instance=request.url.path, **exc.extensions)
 
 
+async def _handle_unavailable(request: Request, exc: Exception) -> JSONResponse:
+    assert isinstance(exc, FeatureUnavailable)
+    return problem(503, str(exc), kind=f"{exc.name}-unavailable", instance=request.url.path)
+
+
 async def _handle_http(request: Request, exc: Exception) -> JSONResponse:
     assert isinstance(exc, StarletteHTTPException)
     kind = "not-found" if exc.status_code == 404 else None
@@ -146,6 +153,7 @@ def install(app: FastAPI) -> None:
     """Answer ``ProblemError``, ``HTTPException`` and request-validation errors as
     ``application/problem+json``, and say so in the OpenAPI description."""
     app.add_exception_handler(ProblemError, _handle)
+    app.add_exception_handler(FeatureUnavailable, _handle_unavailable)
     app.add_exception_handler(StarletteHTTPException, _handle_http)
     app.add_exception_handler(RequestValidationError, _handle_validation)
     _document(app)

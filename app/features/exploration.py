@@ -25,13 +25,13 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.features.mapping import Mapping
+from app.features.navigation import Navigation
 from app.modes import Mode, TransitionRefused
 from nav.exploration import FrontierExplorer, FrontierOptions, FrontierReport, goal_pose
 from nav.types import Pose2D
 
 if TYPE_CHECKING:
-    from app.features.mapping import Mapping
-    from app.features.navigation import Navigation
     from app.runtime import Runtime
     from app.session import Session
     from robot.base import SensorFrame
@@ -449,11 +449,11 @@ class Exploration:
 
 
 def setup(runtime: Runtime) -> Exploration | None:
-    mapping = runtime.features.get("mapping")
-    navigation = runtime.features.get("navigation")
+    mapping = runtime.find_feature(Mapping)
+    navigation = runtime.find_feature(Navigation)
     if mapping is None or navigation is None:
         log.warning("exploration needs the mapping and navigation features")
         return None
-    exploration = Exploration(runtime.session, mapping, navigation)  # type: ignore[arg-type]
+    exploration = Exploration(runtime.session, mapping, navigation)
     runtime.session.add_stage(exploration)
     return exploration

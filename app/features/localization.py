@@ -577,7 +577,7 @@ def setup(runtime: Runtime) -> Localization:
     runtime.pose_input_handlers["initial_pose"] = loc.set_initial_pose
 
     def _record_map(grid: OccupancyGrid, map_id: int | None) -> None:
-        runtime.active_map_id = map_id  # type: ignore[attr-defined]  # read by the recorder feature
+        runtime.active_map_id = map_id  # read by the recorder feature
 
     loc.add_map_listener(_record_map)
     return loc

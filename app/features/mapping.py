@@ -35,6 +35,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.features.localization import Localization
+from app.features.recording import Recording
 from app.modes import Mode
 from nav.slam.system import GraphSlam
 from nav.types import LaserScan, OccupancyGrid, Pose2D
@@ -441,22 +443,21 @@ def setup(runtime: Runtime) -> Mapping:
     mapping = Mapping(runtime.session)
 
     def run_id() -> int | None:
-        rec = runtime.features.get("recording")  # set up later (ORDER 900): looked up when needed
-        return getattr(getattr(rec, "recorder", None), "current_run_id", None)
+        rec = runtime.find_feature(Recording)  # set up later (ORDER 900): looked up when needed
+        return None if rec is None else rec.recorder.current_run_id
 
     mapping.run_id_source = run_id
 
     def hand_off(grid: OccupancyGrid) -> None:
         """The new map becomes the active (unsaved) map; the robot is localized where SLAM left it."""
-        loc = runtime.features.get("localization")
-        if loc is None or not hasattr(loc, "set_map"):
+        loc = runtime.find_feature(Localization)
+        if loc is None:
             return
         loc.set_map(grid, None)
-        if hasattr(loc, "set_initial_pose"):
-            try:
-                loc.set_initial_pose(runtime.session.pose)
-            except Exception as exc:  # e.g. the pose fell on an occupied cell: the operator sets it
-                runtime.session.add_event("mapping", status="not localized on the new map", reason=str(exc))
+        try:
+            loc.set_initial_pose(runtime.session.pose)
+        except Exception as exc:  # e.g. the pose fell on an occupied cell: the operator sets it
+            runtime.session.add_event("mapping", status="not localized on the new map", reason=str(exc))
 
     mapping.on_finished = hand_off
     runtime.session.add_stage(mapping)

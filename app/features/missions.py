@@ -324,8 +324,8 @@ class Missions:
 
 
 def setup(runtime: Runtime) -> Missions | None:
-    nav = runtime.features.get("navigation")
+    nav = runtime.find_feature(Navigation)
     if nav is None:
         log.warning("missions need the navigation feature")
         return None
-    return Missions(nav)  # type: ignore[arg-type]
+    return Missions(nav)

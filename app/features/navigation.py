@@ -37,6 +37,8 @@ from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
 
+from app.features.localization import Localization
+from app.features.mapping import Mapping
 from app.modes import Mode, TransitionRefused
 from nav.behaviors import BehaviorContext, Status
 from nav.behaviors.base import BehaviorLimits
@@ -66,7 +68,6 @@ from nav.walkers import MAX_SCAN_GAP, PERSON_RADIUS, WalkerTracker, near_points
 from nav.warmup import warm_up_navigation
 
 if TYPE_CHECKING:
-    from app.features.localization import Localization
     from app.runtime import Runtime
     from app.session import Session
     from nav.navigator import NavTick, PlanRequest
@@ -368,7 +369,7 @@ class Navigation:
         self._seen_updates = 0  # localization updates already given to the divergence monitor
         self._safety_stop_since: float | None = None
         self._last_map_to_odom = session.map_to_odom
-        self.mapping: Any = None  # the mapping feature, when set up: goals while it runs
+        self.mapping: Mapping | None = None  # the mapping feature, when set up: goals while it runs
         self._live_generation: int | None = None  # mapping session whose live map the costmaps hold
         self._in_mapping = False  # the running request drives in MAPPING
         self._mapping_recovery = False  # a recovery runs for it (MAPPING has no RECOVERING mode)
@@ -1267,13 +1268,13 @@ def _offset(pose: Pose2D, goal: Pose2D | None) -> dict[str, float | None]:
 
 
 def setup(runtime: Runtime) -> Navigation | None:
-    loc = runtime.features.get("localization")
+    loc = runtime.find_feature(Localization)
     if loc is None:
         log.warning("navigation needs the localization feature")
         return None
-    nav = Navigation(runtime.session, loc)  # type: ignore[arg-type]
-    mapping = runtime.features.get("mapping")
-    if mapping is not None and hasattr(mapping, "add_grid_listener"):
+    nav = Navigation(runtime.session, loc)
+    mapping = runtime.find_feature(Mapping)
+    if mapping is not None:
         nav.mapping = mapping
         mapping.add_grid_listener(nav.on_live_map)
     runtime.session.add_stage(nav)

@@ -25,9 +25,8 @@ log = logging.getLogger("navdeck.runs")
 def current_map_id(runtime: Runtime) -> int | None:
     """The map the robot runs on: ``runtime.active_map_id`` when a feature sets one, else the stock
     map of the simulated world."""
-    active = getattr(runtime, "active_map_id", None)
-    if active is not None:
-        return int(active)
+    if runtime.active_map_id is not None:
+        return runtime.active_map_id
     if runtime.world_name:
         info = runtime.maps.find(runtime.world_name, stock=True)
         return None if info is None else info.id

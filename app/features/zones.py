@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from app.features.localization import Localization
+from app.features.navigation import Navigation
 from app.limits import SpeedLimit
 from app.zone_store import Zone, ZoneKind, ZoneStore
 from nav.costmap.filter_layer import points_in_polygon, rasterize_polygons
@@ -57,7 +59,13 @@ class ActiveZones:
 class Zones:
     """The zones stage. ``reload`` is thread-safe (API); ``tick`` runs on the control loop."""
 
-    def __init__(self, session: Session, store: ZoneStore, localization: Any, navigation: Any) -> None:
+    def __init__(
+        self,
+        session: Session,
+        store: ZoneStore,
+        localization: Localization | None,
+        navigation: Navigation | None,
+    ) -> None:
         self.session = session
         self.store = store
         self.localization = localization
@@ -206,8 +214,8 @@ def setup(runtime: Runtime) -> Zones:
     zones = Zones(
         runtime.session,
         ZoneStore(runtime.engine),
-        runtime.features.get("localization"),
-        runtime.features.get("navigation"),
+        runtime.find_feature(Localization),
+        runtime.find_feature(Navigation),
     )
     runtime.session.add_stage(zones)
     return zones

@@ -12,25 +12,14 @@ from typing import Annotated
 from fastapi import APIRouter, Depends
 from pydantic import BaseModel, Field
 
-from app.api.deps import ActorDep, RuntimeDep, StrictModel
+from app.api.deps import ActorDep, StrictModel, feature_dependency
 from app.api.problems import ProblemError, problem_responses
 from app.features.exploration import Exploration, ExplorationRefused, ExplorationState
 
 router = APIRouter(tags=["exploration"])
 
 
-def get_exploration(rt: RuntimeDep) -> Exploration:
-    ex = rt.features.get("exploration")
-    if ex is None:
-        raise ProblemError(
-            503,
-            "exploration is not running on this server (it needs mapping and navigation)",
-            kind="exploration-unavailable",
-        )
-    return ex  # type: ignore[return-value]
-
-
-ExplorationDep = Annotated[Exploration, Depends(get_exploration)]
+ExplorationDep = Annotated[Exploration, Depends(feature_dependency(Exploration))]
 
 
 class ExplorationStartIn(StrictModel):

@@ -8,7 +8,7 @@ from fastapi import APIRouter, Depends
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field
 
-from app.api.deps import RuntimeDep, StrictModel
+from app.api.deps import StrictModel, feature_dependency
 from app.api.problems import ProblemError
 from app.api.routes.robot import refused
 from app.api.schemas import ERRORS, Out, Pose
@@ -71,14 +71,7 @@ class LocalizationOut(Out):
     )
 
 
-def get_localization_feature(rt: RuntimeDep) -> Localization:
-    loc = rt.features.get("localization")
-    if loc is None:
-        raise ProblemError(503, "localization is not running on this server", kind="localization-unavailable")
-    return loc  # type: ignore[return-value]
-
-
-LocalizationDep = Annotated[Localization, Depends(get_localization_feature)]
+LocalizationDep = Annotated[Localization, Depends(feature_dependency(Localization))]
 UNAVAILABLE = ERRORS(s503="localization is not running")
 
 

@@ -2,18 +2,20 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Any
+from typing import Annotated
 
 from fastapi import APIRouter, Depends
 from pydantic import Field
 
-from app.api.deps import RuntimeDep, StrictModel
+from app.api.deps import RuntimeDep, StrictModel, feature_dependency
 from app.api.problems import ProblemError
 from app.api.routes.maps import MapOut, active_map_id, map_out
 from app.api.routes.robot import refused
 from app.api.schemas import ERRORS, Out, Pair
 from app.features.mapping import Mapping, NoMapError
+from app.features.recording import Recording
 from app.modes import TransitionRefused
+from app.runtime import Runtime
 
 router = APIRouter(tags=["mapping"])
 
@@ -29,14 +31,7 @@ class MappingOut(Out):
     scans_dropped: int
 
 
-def get_mapping_feature(rt: RuntimeDep) -> Mapping:
-    mapping = rt.features.get("mapping")
-    if mapping is None:
-        raise ProblemError(503, "mapping is not running on this server", kind="mapping-unavailable")
-    return mapping  # type: ignore[return-value]
-
-
-MappingDep = Annotated[Mapping, Depends(get_mapping_feature)]
+MappingDep = Annotated[Mapping, Depends(feature_dependency(Mapping))]
 UNAVAILABLE = ERRORS(s503="mapping is not running")
 
 
@@ -111,9 +106,8 @@ def save_map(body: SaveMapIn, rt: RuntimeDep, mapping: MappingDep) -> MapOut:
     return map_out(info, active_map_id(rt))
 
 
-def _run_id(rt: Any, mapping: Any) -> int | None:
+def _run_id(rt: Runtime, mapping: Mapping) -> int | None:
     """The recorder's run of this mapping session, when one was recorded."""
-    rec = rt.features.get("recording")
-    recorder = getattr(rec, "recorder", None)
-    run_id = getattr(recorder, "current_run_id", None)
+    rec = rt.find_feature(Recording)
+    run_id = None if rec is None else rec.recorder.current_run_id
     return run_id if run_id is not None else mapping.run_id

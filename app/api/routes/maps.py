@@ -16,10 +16,12 @@ from pydantic import Field
 from app.api.deps import MapInfoDep, RuntimeDep, StrictModel
 from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp, Triple
-from app.features.localization import map_fit
+from app.features.localization import Localization, map_fit
+from app.features.mapping import Mapping
 from app.features.recording import current_map_id
 from app.map_store import MapInfo
 from app.modes import Mode
+from app.runtime import Runtime
 from maps.mapio import DEFAULT_MAX_PIXELS, MapFormatError, encode_pgm, encode_yaml, read_map_bytes
 from maps.png import encode_png
 from maps.render import grid_to_grey
@@ -67,10 +69,10 @@ class ActivatedOut(MapOut):
     )
 
 
-def active_map_id(rt: Any) -> int | None:
+def active_map_id(rt: Runtime) -> int | None:
     """The map the robot localizes and plans in (the localization feature's, else the world's)."""
-    loc = rt.features.get("localization")
-    if loc is not None and getattr(loc, "map_id", None) is not None:
+    loc = rt.find_feature(Localization)
+    if loc is not None and loc.map_id is not None:
         return int(loc.map_id)
     return current_map_id(rt)
 
@@ -320,12 +322,12 @@ def activate_map(map_id: DbId, rt: RuntimeDep) -> ActivatedOut:
     if info is None:
         raise HTTPException(404, f"no map with id {map_id}")
     grid = _grid(rt, map_id)
-    loc = rt.features.get("localization")
+    loc = rt.find_feature(Localization)
     score = _refuse_other_world(rt, loc, grid, map_id)
-    if loc is not None and hasattr(loc, "set_map"):
+    if loc is not None:
         loc.set_map(grid, map_id)
-        mapping = rt.features.get("mapping")
-        if getattr(mapping, "saved_map_id", None) == map_id and hasattr(loc, "set_initial_pose"):
+        mapping = rt.find_feature(Mapping)
+        if mapping is not None and mapping.saved_map_id == map_id:
             # The map this mapping session just built: same map frame, so the robot's pose holds.
             with contextlib.suppress(Exception):
                 loc.set_initial_pose(session.pose)
@@ -342,7 +344,9 @@ it fits the world's own map (the same measure, ``Amcl.quality``): a copy of the 
 a map of another world far less (docs/api.md has the measured figures)."""
 
 
-def _refuse_other_world(rt: Any, loc: Any, grid: OccupancyGrid, map_id: int) -> float | None:
+def _refuse_other_world(
+    rt: Runtime, loc: Localization | None, grid: OccupancyGrid, map_id: int
+) -> float | None:
     """In simulation, 409 for a map the lidar does not see. The latest scan's fit to the map, at the
     robot's true pose (a map in the world's frame) or at its current estimate (a map in the current
     map frame, e.g. the one mapping just built), is compared with its fit to the world's own map at the

@@ -12,7 +12,7 @@ from typing import Annotated, Literal
 from fastapi import APIRouter, Depends, Query, Response
 from pydantic import BaseModel, Field
 
-from app.api.deps import ActorDep, RuntimeDep, StrictModel
+from app.api.deps import ActorDep, StrictModel, feature_dependency
 from app.api.problems import ProblemError, problem_responses
 from app.features.missions import (
     GoalState,
@@ -111,14 +111,7 @@ class MissionPage(BaseModel):
     items: list[MissionOut]
 
 
-def get_missions(rt: RuntimeDep) -> Missions:
-    m = rt.features.get("missions")
-    if m is None:
-        raise ProblemError(503, "navigation is not running on this server", kind="navigation-unavailable")
-    return m  # type: ignore[return-value]
-
-
-MissionsDep = Annotated[Missions, Depends(get_missions)]
+MissionsDep = Annotated[Missions, Depends(feature_dependency(Missions))]
 
 NOT_FOUND = problem_responses(s404="no such mission")
 UNAVAILABLE = problem_responses(s503="navigation is not running")

@@ -7,7 +7,7 @@ from typing import Annotated, Any, Literal
 from fastapi import APIRouter, Depends
 from pydantic import Field
 
-from app.api.deps import ActorDep, RuntimeDep, StrictModel
+from app.api.deps import ActorDep, RuntimeDep, StrictModel, feature_dependency
 from app.api.problems import ProblemError, problem_responses
 from app.api.routes.missions import MissionsDep, start_mission
 from app.api.routes.places import resolve_place
@@ -44,14 +44,7 @@ class PlaceGoalIn(StrictModel):
     controller: Literal["dwa", "teb"] | None = None
 
 
-def get_navigation_feature(rt: RuntimeDep) -> Navigation:
-    nav = rt.features.get("navigation")
-    if nav is None:
-        raise ProblemError(503, "navigation is not running on this server", kind="navigation-unavailable")
-    return nav  # type: ignore[return-value]
-
-
-NavigationDep = Annotated[Navigation, Depends(get_navigation_feature)]
+NavigationDep = Annotated[Navigation, Depends(feature_dependency(Navigation))]
 UNAVAILABLE = problem_responses(s503="navigation is not running")
 
 

@@ -12,12 +12,13 @@ from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from pydantic import Field
 
-from app.api.deps import RuntimeDep, StrictModel, get_runtime
+from app.api.deps import RuntimeDep, StrictModel, feature_dependency, get_runtime_ws
 from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, OpenOut, Out, Page, Pair, Timestamp, Triple
 from app.export.data import RunData, load_run
 from app.export.mcap import mcap_bytes
 from app.export.tabular import run_json, samples_columns, samples_csv
+from app.features.recording import Recording
 from app.runs.codec import MODES
 from app.runs.importer import BagImports, ImportInputError, ImportJob
 from app.runs.replay import ReplayError
@@ -149,16 +150,14 @@ EXPORT_NOTE = (
 )
 
 
-def _recording(rt: RuntimeDep):
-    rec = rt.features.get("recording")
-    if rec is None:
-        raise HTTPException(503, "run recording is not enabled on this server")
-    return rec
+RecordingDep = Annotated[Recording, Depends(feature_dependency(Recording))]
 
 
-def get_store(rt: Annotated[object, Depends(get_runtime)]) -> RunsStore:
-    rec = getattr(rt, "features", {}).get("recording")
-    return rec.store if rec is not None else RunsStore(rt.engine)  # type: ignore[attr-defined]
+def get_store(rt: RuntimeDep) -> RunsStore:
+    """The recorder's store, or one over the server's database when recording is off (runs can
+    still be listed, imported and exported)."""
+    rec = rt.find_feature(Recording)
+    return rec.store if rec is not None else RunsStore(rt.engine)
 
 
 StoreDep = Annotated[RunsStore, Depends(get_store)]
@@ -191,10 +190,9 @@ def _found(fn, *args):
 # ------------------------------------------------------------------------------------- bag import
 def get_imports(rt: RuntimeDep, store: StoreDep) -> BagImports:
     """The server's import queue (one per runtime, closed with it: Runtime.close closes features)."""
-    imports = rt.features.get("bag_imports")
-    if imports is None:
-        imports = rt.features.setdefault("bag_imports", BagImports(store))
-    return imports
+    if rt.find_feature(BagImports) is None:
+        rt.features.setdefault("bag_imports", BagImports(store))
+    return rt.feature(BagImports)
 
 
 ImportsDep = Annotated[BagImports, Depends(get_imports)]
@@ -428,7 +426,7 @@ def delete_run(run_id: DbId, store: StoreDep) -> Response:
 def _load(store: RunsStore, run_id: int, rt: Runtime) -> RunData:
     """The run's data for an exporter; the run being recorded is flushed first, so a partial export
     holds everything up to this request (a starved recorder: what is stored, still flagged partial)."""
-    rec = rt.features.get("recording")
+    rec = rt.find_feature(Recording)
     if rec is not None and rec.recorder.current_run_id == run_id:
         with contextlib.suppress(TimeoutError):
             rec.recorder.sync(timeout=5.0)
@@ -457,8 +455,8 @@ class ReplayCommand(StrictModel):
 
 
 @router.get("/api/replay", response_model=ReplayOut, summary="Replay player state", responses=NO_RECORDING)
-def replay_state(rt: RuntimeDep) -> dict:
-    return _recording(rt).replay.state()
+def replay_state(rec: RecordingDep) -> dict:
+    return rec.replay.state()
 
 
 @router.post(
@@ -467,8 +465,8 @@ def replay_state(rt: RuntimeDep) -> dict:
     summary="Control the replay in the 3D view (served at /replay/viz/)",
     responses={**NOT_FOUND, **ERRORS(s409="the player refused (no run loaded...)"), **NO_RECORDING},
 )
-def replay_control(cmd: ReplayCommand, rt: RuntimeDep) -> dict:
-    player = _recording(rt).replay
+def replay_control(cmd: ReplayCommand, rec: RecordingDep) -> dict:
+    player = rec.replay
     try:
         if cmd.action == "load":
             if cmd.run_id is None:
@@ -505,6 +503,6 @@ async def replay_viz_index() -> FileResponse:
 @router.websocket("/replay/viz")
 async def replay_viz_ws(ws: WebSocket) -> None:
     """The replay viewer's viser websocket, relayed like the live one (app/viewer/relay.py)."""
-    rec = ws.app.state.runtime.features.get("recording")
+    rec = get_runtime_ws(ws).find_feature(Recording)
     player = None if rec is None else rec.replay_if_started
     await relay_to_viewer(ws, None if player is None else player.viewer)

@@ -14,7 +14,7 @@ from fastapi import APIRouter, Depends, File, Form, Query, Response, UploadFile
 from fastapi.concurrency import run_in_threadpool
 from pydantic import Field, model_validator
 
-from app.api.deps import MapInfoDep, RuntimeDep, StrictModel
+from app.api.deps import MapInfoDep, RuntimeDep, StrictModel, feature_dependency
 from app.api.problems import ProblemError
 from app.api.schemas import ERRORS, DbId, Out, Page, Pair, Timestamp
 from app.features.zones import Zones
@@ -79,14 +79,7 @@ class ZonePage(Page[ZoneOut]):
     map_id: int
 
 
-def get_zones(rt: RuntimeDep) -> Zones:
-    z = rt.features.get("zones")
-    if z is None:
-        raise ProblemError(503, "zones are not running on this server", kind="zones-unavailable")
-    return z  # type: ignore[return-value]
-
-
-ZonesDep = Annotated[Zones, Depends(get_zones)]
+ZonesDep = Annotated[Zones, Depends(feature_dependency(Zones))]
 
 NO_MAP = ERRORS(s404="no such map")
 NO_ZONE = ERRORS(s404="no such zone")
