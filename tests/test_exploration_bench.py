@@ -56,6 +56,49 @@ def test_a_wall_face_mapped_occupied_is_explored_and_a_ghost_or_a_hole_is_not():
     assert cmp.agreement < 1.0  # the ghost obstacle disagrees
 
 
+def _truth_path() -> np.ndarray:
+    """(M, 3) t, x, y: 20 m east along a corridor, then 6 m north into a room, from (2, 3)."""
+    t = np.arange(0.0, 100.0, 0.05)
+    s = 0.26 * t
+    x = 2.0 + np.minimum(s, 20.0)
+    y = 3.0 + np.clip(s - 20.0, 0.0, 6.0)
+    return np.column_stack((t, x, y))
+
+
+def _slam_of(truth: np.ndarray, start: Pose2D, scale: tuple[float, float], stride: int = 4) -> np.ndarray:
+    """(N, 4) t, x, y, theta in the map frame (which starts at ``start``) of a SLAM whose map is
+    ``scale`` times the world about the start, one scan every ``stride`` truth samples."""
+    t = truth[::stride, 0]
+    world_xy = (truth[::stride, 1:3] - (start.x, start.y)) * scale + (start.x, start.y)
+    xy = start.inverse().transform_points(world_xy)
+    return np.column_stack((t, xy, np.zeros(len(t))))
+
+
+def test_slam_drift_finds_a_map_drawn_smaller_than_the_world():
+    """A SLAM map 0.5 % smaller along x and 0.3 % along y than the world: the fit finds both,
+    whatever the start's heading (the map frame is rotated against the world), and the trajectory
+    error grows to 0.5 % of the 20 m east (+ 0.3 % of the 6 m north) at the far end."""
+    truth = _truth_path()
+    start = Pose2D(2.0, 3.0, 0.7)
+    drift = bx.slam_drift(_slam_of(truth, start, (0.995, 0.997)), truth, start)
+    assert drift.scale_pct == pytest.approx((-0.5, -0.3), abs=1e-6)
+    assert drift.max_m == pytest.approx(np.hypot(0.005 * 20.0, 0.003 * 6.0), rel=1e-3)
+    assert 0.0 < drift.mean_m < drift.max_m
+    assert drift.residual_m == pytest.approx(0.0, abs=1e-9)
+
+
+def test_slam_drift_of_an_exact_trajectory_is_nil_and_scans_past_the_truth_are_left_out():
+    truth = _truth_path()
+    start = Pose2D(2.0, 3.0, -0.4)
+    slam = _slam_of(truth, start, (1.0, 1.0))
+    late = np.array([[truth[-1, 0] + 1.0, 50.0, 50.0, 0.0]])  # a scan after the truth ends: not judged
+    drift = bx.slam_drift(np.vstack((slam, late)), truth, start)
+    assert drift.max_m == pytest.approx(0.0, abs=1e-9)
+    assert drift.scale_pct == pytest.approx((0.0, 0.0), abs=1e-6)
+    empty = bx.slam_drift(np.zeros((0, 4)), truth, start)
+    assert np.isnan(empty.mean_m) and np.isnan(empty.scale_pct[0])
+
+
 def test_places_are_in_order_of_travel_and_see_the_reachable_free_area(rooms):
     world, s = rooms
     assert np.all(np.diff(s.travel) >= 0)
