@@ -56,6 +56,41 @@ def test_a_wall_face_mapped_occupied_is_explored_and_a_ghost_or_a_hole_is_not():
     assert cmp.agreement < 1.0  # the ghost obstacle disagrees
 
 
+def test_an_occupied_cell_just_past_an_outer_wall_agrees_and_one_further_out_or_free_does_not():
+    """Generated worlds' outer walls end at the grid's edge: a map cell one cell past a wall's
+    outer face is occupied within one cell of that wall (agrees); two cells out, or free, it does
+    not."""
+    world = World.box(4.0, 3.0)
+    start = Pose2D(2.0, 1.5, 0.0)
+    wg = world.geometry
+    k = 3  # the map reaches k cells past the world grid on every side
+    inner = np.where(world.static_occupied, 100, np.where(bx.reachable_free(world, start), 0, -1))
+    geometry = GridGeometry(
+        wg.resolution,
+        wg.width + 2 * k,
+        wg.height + 2 * k,
+        start.inverse().compose(Pose2D(-k * wg.resolution, -k * wg.resolution, 0.0)),
+    )
+
+    def agreement(ring: int, value: int) -> tuple[float, int]:
+        data = np.full((wg.height + 2 * k, wg.width + 2 * k), -1, dtype=np.int8)
+        data[k:-k, k:-k] = inner
+        lo = k - ring  # the ring `ring` cells outside the grid
+        hi_r, hi_c = data.shape[0] - 1 - lo, data.shape[1] - 1 - lo
+        band = np.zeros(data.shape, bool)
+        band[lo, lo : hi_c + 1] = band[hi_r, lo : hi_c + 1] = True
+        band[lo : hi_r + 1, lo] = band[lo : hi_r + 1, hi_c] = True
+        data[band] = value
+        counted = np.count_nonzero((data >= 0) & ((data <= 25) | (data >= 65)))
+        return bx.compare(OccupancyGrid(geometry, data), world, start, start).agreement, counted
+
+    assert agreement(1, 100)[0] == 1.0
+    for ring, value in ((2, 100), (1, 0)):
+        got, counted = agreement(ring, value)
+        ring_cells = 2 * (wg.width + 2 * ring) + 2 * (wg.height + 2 * ring) - 4
+        assert got == pytest.approx(1.0 - ring_cells / counted)
+
+
 def _truth_path() -> np.ndarray:
     """(M, 3) t, x, y: 20 m east along a corridor, then 6 m north into a room, from (2, 3)."""
     t = np.arange(0.0, 100.0, 0.05)
