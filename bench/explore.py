@@ -15,7 +15,11 @@ wall-time budget come from ``NAVDECK_EXPLORE_*`` (``FamilyConfig``). Figures per
   is the share known free alone;
 - map agreement: known cells of the built map whose class agrees with the world: a free cell
   (<= 25) where the world is free inside its outer walls, an occupied cell (>= 65) within one cell
-  of a world wall (the map's registration error); cells in between are not counted;
+  of a world wall (the map's registration error); cells in between are not counted; the world
+  has a one-cell border of open ground (outer walls end at its grid's edge);
+- SLAM's drift (``slam_drift``): its trajectory against the true one, and the map's scale error
+  from an affine fit; a wall d metres from the start is drawn about d x scale off, which is why
+  an office's agreement falls where an apartment's does not;
 - collisions (runs with any control tick in contact, and the ticks);
 - time, against the shortest tour that sees everything, which is not computed exactly (a watchman
   route: NP-hard) but bracketed (``Sight``: places every 0.2 m the robot's centre may occupy, sight
