@@ -3,11 +3,14 @@ tour the exploration time is compared with, and the family mode's settings and w
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy import ndimage
 
 import bench.explore as bx
+from app.commands.explore import ExploreConfig, run_explore
 from bench.visibility import visible_cells, visible_cells_reference
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 from robot.sim import World
@@ -132,6 +135,17 @@ def test_slam_drift_of_an_exact_trajectory_is_nil_and_scans_past_the_truth_are_l
     assert drift.scale_pct == pytest.approx((0.0, 0.0), abs=1e-6)
     empty = bx.slam_drift(np.zeros((0, 4)), truth, start)
     assert np.isnan(empty.mean_m) and np.isnan(empty.scale_pct[0])
+
+
+def test_navdeck_explore_reports_slams_drift_against_the_truth():
+    """A short exploration of the stock apartment: the result carries SLAM's trajectory error
+    against the truth (centimetres over a few metres) and the map's scale along x and y, as JSON."""
+    res = run_explore(ExploreConfig(world="apartment", seed=0, timeout=15.0))
+    assert res.state == "timeout" and res.path_length_m > 0.5
+    assert 0.0 <= res.slam_error_mean_m <= res.slam_error_max_m < 0.2
+    out = json.loads(json.dumps(res.as_dict()))
+    assert len(out["slam_scale_pct"]) == 2
+    assert out["slam_error_max_m"] == pytest.approx(res.slam_error_max_m, abs=1e-3)
 
 
 def test_places_are_in_order_of_travel_and_see_the_reachable_free_area(rooms):
