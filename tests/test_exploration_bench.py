@@ -148,6 +148,19 @@ def test_navdeck_explore_reports_slams_drift_against_the_truth():
     assert out["slam_error_max_m"] == pytest.approx(res.slam_error_max_m, abs=1e-3)
 
 
+def test_the_family_reports_the_worst_slam_drift_and_skips_runs_without_it():
+    base = {k: 1.0 for k in ("explored_pct", "explored_free_pct", "agreement_pct", "collisions", "ratio")}
+    base |= {"tour_ratio": 1.0, "time_s": 100.0, "complete": 1.0}
+    runs = [
+        base | {"slam_error_max_m": 0.05, "slam_scale_x_pct": -0.2, "slam_scale_y_pct": 0.1},
+        base | {"slam_error_max_m": 0.19, "slam_scale_x_pct": 0.3, "slam_scale_y_pct": -0.61},
+        dict(base),  # a run logged before the figures existed
+    ]
+    figures = {f.name: f.value for f in bx._family_figures("office", runs)}
+    assert figures["office (N=3): SLAM trajectory error, worst max"] == pytest.approx(0.19)
+    assert figures["office (N=3): SLAM map scale error, worst |%|"] == pytest.approx(0.61)
+
+
 def test_places_are_in_order_of_travel_and_see_the_reachable_free_area(rooms):
     world, s = rooms
     assert np.all(np.diff(s.travel) >= 0)
