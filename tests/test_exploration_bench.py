@@ -3,11 +3,14 @@ tour the exploration time is compared with, and the family mode's settings and w
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from scipy import ndimage
 
 import bench.explore as bx
+from app.commands.explore import ExploreConfig, run_explore
 from bench.visibility import visible_cells, visible_cells_reference
 from nav.types import GridGeometry, OccupancyGrid, Pose2D
 from robot.sim import World
@@ -54,6 +57,108 @@ def test_a_wall_face_mapped_occupied_is_explored_and_a_ghost_or_a_hole_is_not():
     assert cmp.explored == pytest.approx(1.0 - (9 + 25) / n)
     assert cmp.explored_free == pytest.approx(1.0 - (np.count_nonzero(face & reach) + 9 + 25) / n)
     assert cmp.agreement < 1.0  # the ghost obstacle disagrees
+
+
+def test_an_occupied_cell_just_past_an_outer_wall_agrees_and_one_further_out_or_free_does_not():
+    """Generated worlds' outer walls end at the grid's edge: a map cell one cell past a wall's
+    outer face is occupied within one cell of that wall (agrees); two cells out, or free, it does
+    not."""
+    world = World.box(4.0, 3.0)
+    start = Pose2D(2.0, 1.5, 0.0)
+    wg = world.geometry
+    k = 3  # the map reaches k cells past the world grid on every side
+    inner = np.where(world.static_occupied, 100, np.where(bx.reachable_free(world, start), 0, -1))
+    geometry = GridGeometry(
+        wg.resolution,
+        wg.width + 2 * k,
+        wg.height + 2 * k,
+        start.inverse().compose(Pose2D(-k * wg.resolution, -k * wg.resolution, 0.0)),
+    )
+
+    def agreement(ring: int, value: int) -> tuple[float, int]:
+        data = np.full((wg.height + 2 * k, wg.width + 2 * k), -1, dtype=np.int8)
+        data[k:-k, k:-k] = inner
+        lo = k - ring  # the ring `ring` cells outside the grid
+        hi_r, hi_c = data.shape[0] - 1 - lo, data.shape[1] - 1 - lo
+        band = np.zeros(data.shape, bool)
+        band[lo, lo : hi_c + 1] = band[hi_r, lo : hi_c + 1] = True
+        band[lo : hi_r + 1, lo] = band[lo : hi_r + 1, hi_c] = True
+        data[band] = value
+        counted = np.count_nonzero((data >= 0) & ((data <= 25) | (data >= 65)))
+        return bx.compare(OccupancyGrid(geometry, data), world, start, start).agreement, counted
+
+    assert agreement(1, 100)[0] == 1.0
+    for ring, value in ((2, 100), (1, 0)):
+        got, counted = agreement(ring, value)
+        ring_cells = 2 * (wg.width + 2 * ring) + 2 * (wg.height + 2 * ring) - 4
+        assert got == pytest.approx(1.0 - ring_cells / counted)
+
+
+def _truth_path() -> np.ndarray:
+    """(M, 3) t, x, y: 20 m east along a corridor, then 6 m north into a room, from (2, 3)."""
+    t = np.arange(0.0, 100.0, 0.05)
+    s = 0.26 * t
+    x = 2.0 + np.minimum(s, 20.0)
+    y = 3.0 + np.clip(s - 20.0, 0.0, 6.0)
+    return np.column_stack((t, x, y))
+
+
+def _slam_of(truth: np.ndarray, start: Pose2D, scale: tuple[float, float], stride: int = 4) -> np.ndarray:
+    """(N, 4) t, x, y, theta in the map frame (which starts at ``start``) of a SLAM whose map is
+    ``scale`` times the world about the start, one scan every ``stride`` truth samples."""
+    t = truth[::stride, 0]
+    world_xy = (truth[::stride, 1:3] - (start.x, start.y)) * scale + (start.x, start.y)
+    xy = start.inverse().transform_points(world_xy)
+    return np.column_stack((t, xy, np.zeros(len(t))))
+
+
+def test_slam_drift_finds_a_map_drawn_smaller_than_the_world():
+    """A SLAM map 0.5 % smaller along x and 0.3 % along y than the world: the fit finds both,
+    whatever the start's heading (the map frame is rotated against the world), and the trajectory
+    error grows to 0.5 % of the 20 m east (+ 0.3 % of the 6 m north) at the far end."""
+    truth = _truth_path()
+    start = Pose2D(2.0, 3.0, 0.7)
+    drift = bx.slam_drift(_slam_of(truth, start, (0.995, 0.997)), truth, start)
+    assert drift.scale_pct == pytest.approx((-0.5, -0.3), abs=1e-6)
+    assert drift.max_m == pytest.approx(np.hypot(0.005 * 20.0, 0.003 * 6.0), rel=1e-3)
+    assert 0.0 < drift.mean_m < drift.max_m
+    assert drift.residual_m == pytest.approx(0.0, abs=1e-9)
+
+
+def test_slam_drift_of_an_exact_trajectory_is_nil_and_scans_past_the_truth_are_left_out():
+    truth = _truth_path()
+    start = Pose2D(2.0, 3.0, -0.4)
+    slam = _slam_of(truth, start, (1.0, 1.0))
+    late = np.array([[truth[-1, 0] + 1.0, 50.0, 50.0, 0.0]])  # a scan after the truth ends: not judged
+    drift = bx.slam_drift(np.vstack((slam, late)), truth, start)
+    assert drift.max_m == pytest.approx(0.0, abs=1e-9)
+    assert drift.scale_pct == pytest.approx((0.0, 0.0), abs=1e-6)
+    empty = bx.slam_drift(np.zeros((0, 4)), truth, start)
+    assert np.isnan(empty.mean_m) and np.isnan(empty.scale_pct[0])
+
+
+def test_navdeck_explore_reports_slams_drift_against_the_truth():
+    """A short exploration of the stock apartment: the result carries SLAM's trajectory error
+    against the truth (centimetres over a few metres) and the map's scale along x and y, as JSON."""
+    res = run_explore(ExploreConfig(world="apartment", seed=0, timeout=15.0))
+    assert res.state == "timeout" and res.path_length_m > 0.5
+    assert 0.0 <= res.slam_error_mean_m <= res.slam_error_max_m < 0.2
+    out = json.loads(json.dumps(res.as_dict()))
+    assert len(out["slam_scale_pct"]) == 2
+    assert out["slam_error_max_m"] == pytest.approx(res.slam_error_max_m, abs=1e-3)
+
+
+def test_the_family_reports_the_worst_slam_drift_and_skips_runs_without_it():
+    base = {k: 1.0 for k in ("explored_pct", "explored_free_pct", "agreement_pct", "collisions", "ratio")}
+    base |= {"tour_ratio": 1.0, "time_s": 100.0, "complete": 1.0}
+    runs = [
+        base | {"slam_error_max_m": 0.05, "slam_scale_x_pct": -0.2, "slam_scale_y_pct": 0.1},
+        base | {"slam_error_max_m": 0.19, "slam_scale_x_pct": 0.3, "slam_scale_y_pct": -0.61},
+        dict(base),  # a run logged before the figures existed
+    ]
+    figures = {f.name: f.value for f in bx._family_figures("office", runs)}
+    assert figures["office (N=3): SLAM trajectory error, worst max"] == pytest.approx(0.19)
+    assert figures["office (N=3): SLAM map scale error, worst |%|"] == pytest.approx(0.61)
 
 
 def test_places_are_in_order_of_travel_and_see_the_reachable_free_area(rooms):

@@ -83,13 +83,22 @@ class ExploreResult:
     goals_failed: int
     start: tuple[float, float, float]
     wall_s: float
+    slam_error_mean_m: float = math.nan
+    """SLAM's trajectory against the true one (``bench.explore.slam_drift``): mean position error."""
+    slam_error_max_m: float = math.nan
+    slam_scale_pct: tuple[float, float] = (math.nan, math.nan)
+    """The map's scale error along world x and y (%): a wall d metres from the start is drawn about
+    d * scale off (negative: the map is smaller than the world)."""
 
     def as_dict(self) -> dict[str, Any]:
-        d = asdict(self)
-        for k, v in d.items():
+        def clean(v: Any) -> Any:
             if isinstance(v, float):
-                d[k] = round(v, 3) if math.isfinite(v) else None
-        return d
+                return round(v, 3) if math.isfinite(v) else None
+            if isinstance(v, tuple):
+                return [clean(x) for x in v]
+            return v
+
+        return {k: clean(v) for k, v in asdict(self).items()}
 
 
 @dataclass
@@ -181,8 +190,10 @@ def build_explore_stack(
 
 def run_explore(cfg: ExploreConfig, world: World | None = None) -> ExploreResult:
     """Explore ``cfg.world`` (or ``world``) to the end and compare the map with the truth."""
+    import numpy as np
+
     from app.features.exploration import ENDED
-    from bench.explore import compare
+    from bench.explore import compare, slam_drift
     from nav.types import Pose2D
 
     world = world if world is not None else load_world(cfg.world)
@@ -196,11 +207,13 @@ def run_explore(cfg: ExploreConfig, world: World | None = None) -> ExploreResult
         t0 = s.clock.now()
         last = start_truth
         length = 0.0
+        path = [(s.clock.now(), start_truth.x, start_truth.y)]  # the true trajectory, per tick
         while s.clock.now() - t0 < cfg.timeout:
             s.run_for(s.period)
             truth = stack.driver.truth_pose
             length += last.distance_to(truth)
             last = truth
+            path.append((s.clock.now(), truth.x, truth.y))
             if ex.state in ENDED:
                 break
         elapsed = s.clock.now() - t0
@@ -211,6 +224,8 @@ def run_explore(cfg: ExploreConfig, world: World | None = None) -> ExploreResult
             stack.mapping.stop()
         grid = stack.mapping.current_map()
         cmp = compare(grid, world, start_truth, start)
+        slam = stack.mapping.slam
+        drift = slam_drift(slam.trajectory(), np.array(path), start_truth) if slam is not None else None
         status = ex.status()
         return ExploreResult(
             world=cfg.world,
@@ -228,6 +243,15 @@ def run_explore(cfg: ExploreConfig, world: World | None = None) -> ExploreResult
             goals_failed=status["goals_failed"],
             start=(start.x, start.y, start.theta),
             wall_s=time.perf_counter() - wall0,
+            **(
+                {}
+                if drift is None
+                else {
+                    "slam_error_mean_m": drift.mean_m,
+                    "slam_error_max_m": drift.max_m,
+                    "slam_scale_pct": drift.scale_pct,
+                }
+            ),
         )
     finally:
         s.close()
