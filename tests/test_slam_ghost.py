@@ -16,7 +16,7 @@ from bench.ghost import ghost_report, map_after_loop, measure
 from bench.mapping import APARTMENT_LOOP, APARTMENT_START
 from maps.stock import stock_world_path
 from nav.costmap.obstacle_layer import ObstacleLayer, ObstacleLayerOptions
-from nav.grid import VIEW_CLEARED, VIEW_HIT, LogOddsGrid, LogOddsOptions
+from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
 from nav.raycast import traversed_cells
 from nav.slam.loop_closure import LoopCandidate
 from nav.slam.render import render_submaps, view_logodds
@@ -363,11 +363,13 @@ def test_map_view_keeps_a_face_cell_only_grazing_rays_cleared(margin: float) -> 
     for _ in range(5):
         g.insert_scan(Pose2D(), pts, None, None, grazing_shortening(pts, margin))
     assert g.logodds[r[0], c[0]] < 0.0  # the evidence: cleared
-    shown = view_logodds(g.logodds, g.view, opt.l_occ)[r[0], c[0]]
+    shown = view_logodds(g.logodds, g.view, opt.l_occ, edge=False)[r[0], c[0]]
     if margin > 0.0:
         assert g.view[r[0], c[0]] == VIEW_HIT and shown > 0.0
     else:
         assert g.view[r[0], c[0]] == VIEW_CLEARED and shown < 0.0
+        # the edge rule alone: the face cell borders the row behind the face, which no ray observed
+        assert view_logodds(g.logodds, g.view, opt.l_occ)[r[0], c[0]] >= 0.0
     free = (g.logodds < 0.0) & (g.view == VIEW_CLEARED)  # the aisle's middle stays free in the view
     assert free[r[0] - 3, c[0] - 30 : c[0] + 30].all()
 
@@ -445,3 +447,48 @@ def test_greenhouse_map_view_has_no_free_cells_deep_in_the_rows() -> None:
     assert end_error < 0.2, end_error
     assert report.outside == 0, report
     assert report.deeper_than_half_cell <= 10, report
+
+
+def _seen_through_a_door() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A submap (log-odds, seen, view; 0.05 m cells, origin (0, 0)) as the office's corridor submaps
+    hold the corridor's south wall (bench mapping.ghost, stop 33): the wall fills y 1.00-1.10 m for
+    x < 1.0 m (a door from x = 1.0 m); the lidar saw it from the corridor (y > 1.1 m) only. Its
+    corridor face (row 21) holds returns, its room face (row 20) no ray reached, and the room (rows
+    0-19) was cleared by rays through the door, the row under the wall by the ones that passed the
+    jamb's corner. One cell of the room (row 10, column 30) lies between beams, never crossed."""
+    opt = SlamOptions().grid_options()
+    view = np.full((40, 40), VIEW_CLEARED, dtype=np.uint8)
+    view[21, :20] = VIEW_HIT
+    view[20, :19] = VIEW_UNSURE  # the wall's room face: never observed
+    view[20, 19] = VIEW_HIT  # the jamb's end, seen through the door
+    view[10, 30] = VIEW_UNSURE
+    seen = view != VIEW_UNSURE
+    lo = np.where(view == VIEW_HIT, opt.l_max, np.where(seen, opt.l_min, 0.0)).astype(np.float32)
+    return lo, seen, view
+
+
+def test_cleared_edge_facing_space_no_ray_observed_is_not_free() -> None:
+    """The office's last free cells in walls (stop 33): the room face of the corridor's south wall
+    next to door jambs, cleared by rays from the corridor that passed the jamb's corner, with the
+    corridor's submaps placed 4-5 cm north of the truth (pose error). A firmly cleared cell next to
+    unobserved space two cells deep (``render.unsure_edge``) is at least unknown in the map; with
+    the old rule (``edge=False``) the wall's room-face cell is drawn free."""
+    opt = SlamOptions().grid_options()
+    lo, seen, view = _seen_through_a_door()
+    shown = view_logodds(lo, view, opt.l_occ)
+    assert (shown[19, :19] >= 0.0).all()  # the row under the unobserved face: not free
+    assert (shown[22, 2:20] < 0.0).all()  # in front of the face its returns marked: still free
+    assert shown[19, 25] < 0.0 and shown[18, 5] < 0.0  # the door's middle, the room: still free
+    around_hole = shown[[9, 11, 10, 10], [30, 30, 29, 31]]
+    assert (around_hole < 0.0).all()  # a cell between beams erodes nothing
+    assert view_logodds(lo, view, opt.l_occ, edge=False)[19, 5] < 0.0  # the old rule: free
+
+    def room_face(edge: bool) -> np.ndarray:  # the map cells y 1.00-1.05, the wall's room face
+        layer = view_logodds(lo, view, opt.l_occ, edge)
+        grid = render_submaps([(Pose2D(0.0, 0.045, 0.0), np.zeros(2), layer, seen)], opt)
+        occ = grid.to_occupancy_grid()
+        r, c = occ.geometry.world_to_cell(np.column_stack((np.arange(0.125, 0.9, 0.05), np.full(16, 1.025))))
+        return occ.data[r, c]
+
+    assert (room_face(False) <= 25).all()  # free cells in the wall
+    assert (room_face(True) > 25).all()

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from nav.grid import VIEW_CLEARED, VIEW_HIT, LogOddsGrid, LogOddsOptions
+from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
 from nav.slam.kernels import place_submap
 from nav.types import Pose2D
 
@@ -21,18 +21,51 @@ SubmapLayer = tuple[Pose2D, np.ndarray, np.ndarray, np.ndarray]
 """(submap pose in the map frame, grid origin in the submap frame, log-odds, seen mask)."""
 
 
-def view_logodds(lo: np.ndarray, view: np.ndarray | None, l_occ: float) -> np.ndarray:
+def view_logodds(lo: np.ndarray, view: np.ndarray | None, l_occ: float, edge: bool = True) -> np.ndarray:
     """A submap's log-odds as the rendered map shows them (a copy), from its grid's ``view`` states
     (``LogOddsGrid.view``; ``lo`` unchanged where None): a cell whose last firm evidence was a return
     is at least ``l_occ`` (occupied), one that no ray crossed far from its own surface is at least 0
     (not free). Rays that meet a face at a few degrees run within half a cell of it for metres,
     through the cells that straddle it, and outvote the few returns that land in each: the face was
     drawn free though the cells are mostly wall (issue 16, no ghost free space). Only the display:
-    the matched grids keep the plain evidence."""
+    the matched grids keep the plain evidence.
+
+    ``edge``: a firmly cleared cell on the edge of what rays firmly cleared, facing space that is
+    neither (:func:`unsure_edge`), is at least 0 as well."""
     if view is None:
         return lo.copy()
     floor = np.where(view == VIEW_HIT, np.float32(l_occ), np.float32(0.0))
-    return np.where(view == VIEW_CLEARED, lo, np.maximum(lo, floor)).astype(np.float32)
+    free = view == VIEW_CLEARED
+    if edge:
+        free &= ~unsure_edge(view)
+    return np.where(free, lo, np.maximum(lo, floor)).astype(np.float32)
+
+
+_SIDES = ((0, 1), (0, -1), (1, 0), (-1, 0))
+
+
+def unsure_edge(view: np.ndarray) -> np.ndarray:
+    """Cells a ray firmly cleared (:data:`VIEW_CLEARED`) whose next cell in some lattice direction
+    no ray firmly cleared and no return marked (:data:`VIEW_UNSURE`: never observed, or crossed
+    only within a margin of the rays' own surface) and whose cell after that is not firmly cleared
+    either: the edge of the cleared space against an unobserved wall interior, a shadow, a face only
+    grazing rays reached (cells off the grid count as unsure).
+
+    Such a cell was cleared by the outermost rays of a fan, the ones that passed a door jamb's or a
+    post's corner or ran down a face no return landed on, which cross only part of it: the unseen
+    side may begin inside the cell, and a few centimetres of pose error (the office's corridor
+    4-5 cm, the greenhouse's far corner 5 cm) put it there. A cell facing a return (a face seen by
+    its own rays) is not an edge: those rays stopped at that surface, whose cell holds it. A single
+    unobserved cell between beams far from the lidar is not one either (the cell beyond it is
+    cleared)."""
+    h, w = view.shape
+    pad = np.pad(view, 2, constant_values=VIEW_UNSURE)
+    edge = np.zeros(view.shape, dtype=bool)
+    for dr, dc in _SIDES:
+        nxt = pad[2 + dr : 2 + dr + h, 2 + dc : 2 + dc + w] == VIEW_UNSURE
+        after = pad[2 + 2 * dr : 2 + 2 * dr + h, 2 + 2 * dc : 2 + 2 * dc + w] != VIEW_CLEARED
+        edge |= nxt & after
+    return edge & (view == VIEW_CLEARED)
 
 
 def _corners(pose: Pose2D, origin: np.ndarray, shape: tuple[int, int], res: float) -> np.ndarray:
