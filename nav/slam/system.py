@@ -126,9 +126,14 @@ class SlamOptions:
     """A front-end match scoring below this (mean likelihood 0..1) is searched again in the wide
     window below and the better match kept (0 = off)."""
     wide_linear_search_window: float = 0.5
-    """Translation half-width (m) of that second search (coarse-to-fine, 2 levels)."""
+    """Translation half-width (m) of that second search (branch-and-bound: the exhaustive search's
+    result)."""
     wide_angular_search_window: float = math.radians(30.0)
     """Rotation half-width (rad) of that second search."""
+    wide_search_levels: int = 4
+    """Pooled levels of the wide search's branch-and-bound (Cartographer
+    ``branch_and_bound_depth``); the result does not depend on it, only the time (Intel's
+    relation pairs: 4 the cheapest of 2-4)."""
     match_unobserved_points: bool = False
     """Also match points that land in submap cells no scan has observed yet (False: such points
     are left out; front end and loop closure). A point on a newly seen surface (a wall further
@@ -274,6 +279,23 @@ class SlamOptions:
     def grid_options(self) -> LogOddsOptions:
         return LogOddsOptions(resolution=self.resolution, grow_margin=2.0)
 
+    def front_end_windows(self) -> tuple[SearchWindow, SearchWindow]:
+        """The front end's search window and its wide re-search window."""
+        narrow = SearchWindow(
+            self.linear_search_window,
+            self.angular_search_window,
+            self.angular_search_step,
+            self.search_levels,
+        )
+        wide = SearchWindow(
+            self.wide_linear_search_window,
+            self.wide_angular_search_window,
+            self.angular_search_step,
+            self.wide_search_levels,
+            branch_and_bound=True,
+        )
+        return narrow, wide
+
 
 @dataclass
 class _Node:
@@ -390,12 +412,7 @@ class GraphSlam:
         o = self.options
         self._lock = threading.Lock()
         self._backend_lock = threading.Lock()
-        self._window = SearchWindow(
-            o.linear_search_window, o.angular_search_window, o.angular_search_step, o.search_levels
-        )
-        self._wide_window = SearchWindow(
-            o.wide_linear_search_window, o.wide_angular_search_window, o.angular_search_step, 2
-        )
+        self._window, self._wide_window = o.front_end_windows()
         self._loop_window = SearchWindow(
             o.loop_search_space_dimension,
             o.loop_search_angular_window,
