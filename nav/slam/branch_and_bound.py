@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from nav.slam.kernels import _before, block_scores, pairwise_sum32
+from nav.slam.kernels import _before, block_scores, pairwise_sum32, phase_split
 
 
 @njit(cache=True, nogil=True)
@@ -61,7 +61,7 @@ def branch_and_bound_search(
     s = 1 << top
     lo = -((wc + s - 1) // s)  # floor(-wc / s)
     nb = wc // s - lo + 1
-    top_scores = block_scores(pooled[top], rows0, cols0, lo, nb, s).ravel()
+    top_scores = block_scores(pooled[top], phase_split(pooled[top], s), rows0, cols0, lo, nb, s).ravel()
     order = np.argsort(-top_scores, kind="mergesort")
     centre = (na - 1) // 2
     vals = np.empty(n, dtype=np.float32)

@@ -214,7 +214,9 @@ def _correlative(
         elif level < top:
             score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
         else:  # every (angle, block) of the top level, in `cand`'s order
-            score = kernels.block_scores(field.pooled[top], rows0, cols0, int(blocks[0]), len(blocks), s)
+            score = kernels.block_scores(
+                field.pooled[top], field.phase(top), rows0, cols0, int(blocks[0]), len(blocks), s
+            )
             score = score.ravel()
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
