@@ -19,22 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from nav.slam.kernels import _before, block_scores, pairwise_sum32, phase_split
-
-
-@njit(cache=True, nogil=True)
-def _child_score(
-    grid: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, a: int, dy: int, dx: int, vals: np.ndarray
-) -> np.float32:
-    """float32 mean of ``grid`` at angle ``a``'s points moved by (dy, dx) cells (0 outside), summed
-    as :func:`nav.slam.kernels.score_candidates` sums."""
-    h, w = grid.shape
-    n = rows0.shape[1]
-    for i in range(n):
-        r = rows0[a, i] + dy
-        c = cols0[a, i] + dx
-        vals[i] = grid[r, c] if 0 <= r < h and 0 <= c < w else np.float32(0.0)
-    return pairwise_sum32(vals, 0, n) / np.float32(n)
+from nav.slam.kernels import _before, _block_sums, block_scores, phase_split
 
 
 @njit(cache=True, nogil=True)
@@ -64,7 +49,12 @@ def branch_and_bound_search(
     top_scores = block_scores(pooled[top], phase_split(pooled[top], s), rows0, cols0, lo, nb, s).ravel()
     order = np.argsort(-top_scores, kind="mergesort")
     centre = (na - 1) // 2
-    vals = np.empty(n, dtype=np.float32)
+    nf = np.float32(n)
+    part = np.empty((8, 2, 2), dtype=np.float32)
+    sums = np.empty((2, 2), dtype=np.float32)
+    # one pass over the points scores a node's 4 children (cells ``step`` apart on the pooled grid
+    # below, read in place: a single-phase placeholder tells _block_sums so)
+    in_place = np.zeros((1, 1, 1, 1), dtype=np.float32)
     # depth-first stack: (level, angle, by, bx) and the node's bound; at most 4 nodes a level
     cap = 4 * top + 1
     st_l = np.empty(cap, dtype=np.int64)
@@ -101,7 +91,16 @@ def branch_and_bound_search(
                     best, best_dist, ba, bdy, bdx = sc, dist, a, by, bx
                 continue
             step = 1 << (lvl - 1)
-            grid = pooled[lvl - 1]
+            _block_sums(
+                pooled[lvl - 1],
+                in_place,
+                step,
+                rows0[a] + 2 * by * step,
+                cols0[a] + 2 * bx * step,
+                2,
+                part,
+                sums,
+            )
             m = 0
             for q in range(4):
                 cy = 2 * by + q // 2
@@ -109,7 +108,7 @@ def branch_and_bound_search(
                 y0, x0 = cy * step, cx * step
                 if y0 + step - 1 < -wc or y0 > wc or x0 + step - 1 < -wc or x0 > wc:
                     continue  # the child's block misses the window
-                ks = _child_score(grid, rows0, cols0, a, y0, x0, vals)
+                ks = sums[q // 2, q % 2] / nf
                 if ks < best:
                     continue
                 j = m  # insertion sort, ascending: the best child is pushed last, popped first
