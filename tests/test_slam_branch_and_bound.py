@@ -84,6 +84,7 @@ def test_the_narrow_match_as_incumbent_changes_nothing_on_intel_relation_pairs()
         pytest.skip(f"{peers.INTEL_BAG} missing")
     _, related, _ = peers.intel_pairs()
     m = peers.NavdeckScanMatcher()
+    m.wide = SlamOptions(wide_search_branch_and_bound=True, wide_search_levels=4).front_end_windows()[1]
     assert nested(m.window, m.wide)
     for k, (ref, cur, prior) in enumerate(related):
         field = LikelihoodField.from_points(peers._scan_points(ref), m.resolution, m.sigma)
@@ -97,6 +98,7 @@ def test_the_narrow_match_as_incumbent_changes_nothing_on_intel_relation_pairs()
             assert scratch == (ref_pose, ref_score)
 
 
-def test_the_front_end_re_searches_the_wide_window_by_branch_and_bound() -> None:
-    narrow, wide = SlamOptions().front_end_windows()
-    assert wide.branch_and_bound and wide.levels > 0 and nested(narrow, wide)
+def test_the_front_end_can_re_search_the_wide_window_by_branch_and_bound() -> None:
+    narrow, wide = SlamOptions(wide_search_branch_and_bound=True, wide_search_levels=4).front_end_windows()
+    assert wide.branch_and_bound and wide.levels == 4 and nested(narrow, wide)
+    assert not SlamOptions().front_end_windows()[1].branch_and_bound

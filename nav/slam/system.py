@@ -126,14 +126,19 @@ class SlamOptions:
     """A front-end match scoring below this (mean likelihood 0..1) is searched again in the wide
     window below and the better match kept (0 = off)."""
     wide_linear_search_window: float = 0.5
-    """Translation half-width (m) of that second search (branch-and-bound: the exhaustive search's
-    result)."""
+    """Translation half-width (m) of that second search (coarse-to-fine, ``wide_search_levels``)."""
     wide_angular_search_window: float = math.radians(30.0)
     """Rotation half-width (rad) of that second search."""
-    wide_search_levels: int = 4
-    """Pooled levels of the wide search's branch-and-bound (Cartographer
-    ``branch_and_bound_depth``); the result does not depend on it, only the time (Intel's
-    relation pairs: 3 and 4 alike, 2 about 15 % slower)."""
+    wide_search_levels: int = 2
+    """Pooled levels of the wide search: a beam of 48 candidates a level, or with
+    ``wide_search_branch_and_bound`` the depth of the branch-and-bound (Cartographer
+    ``branch_and_bound_depth``: the result does not depend on it, only the time; on Intel's
+    relation pairs 3 and 4 alike, 2 about 15 % slower)."""
+    wide_search_branch_and_bound: bool = False
+    """The wide search by exact branch-and-bound from the narrow match (the exhaustive search's
+    result) rather than the beam. Off: measured no faster (docs/slam.md, stop 33), and the exact
+    optimum moved Intel's rotational error 0.7167 -> 0.7211 deg (translational 0.03389 -> 0.03369 m;
+    ACES and FR079 the same to every digit)."""
     match_unobserved_points: bool = False
     """Also match points that land in submap cells no scan has observed yet (False: such points
     are left out; front end and loop closure). A point on a newly seen surface (a wall further
@@ -292,7 +297,7 @@ class SlamOptions:
             self.wide_angular_search_window,
             self.angular_search_step,
             self.wide_search_levels,
-            branch_and_bound=True,
+            branch_and_bound=self.wide_search_branch_and_bound,
         )
         return narrow, wide
 
