@@ -58,7 +58,7 @@ from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
 from nav.planning.kernel import octile_search
 from nav.slam.field import LikelihoodField
-from nav.slam.matcher import RefineOptions, SearchWindow, match_scan_with_fallback
+from nav.slam.matcher import RefineOptions, match_scan_with_fallback
 from nav.slam.metric import parse_relations, relative_poses
 from nav.slam.system import SlamOptions
 from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, LaserScan, OccupancyGrid, Pose2D, Twist2D
@@ -248,10 +248,7 @@ class NavdeckScanMatcher:
     def __init__(self) -> None:
         o = SlamOptions()
         self.resolution, self.sigma = o.resolution, o.likelihood_sigma
-        self.window = SearchWindow(o.linear_search_window, o.angular_search_window, o.angular_search_step)
-        self.wide = SearchWindow(
-            o.wide_linear_search_window, o.wide_angular_search_window, o.angular_search_step, 2
-        )
+        self.window, self.wide = o.front_end_windows()
         self.minimum_score = o.wide_search_minimum_score
         self.refine = RefineOptions(
             translation_weight=o.translation_weight, rotation_weight=o.rotation_weight

@@ -243,7 +243,7 @@ def test_compiled_top_level_scores_equal_the_reference(size: int) -> None:
     field = LikelihoodField(rng.random((size, size)).astype(np.float32), np.zeros(2), 0.05, levels=2)
     rows0 = rng.integers(-8, size + 8, (3, 100))
     cols0 = rng.integers(-8, size + 8, (3, 100))
-    fast = kernels.block_scores(field.pooled[2], rows0, cols0, -3, 6, 4)
+    fast = kernels.block_scores(field.pooled[2], field.phase(2), rows0, cols0, -3, 6, 4)
     a_idx, by, bx = np.meshgrid(np.arange(3), np.arange(-3, 3), np.arange(-3, 3), indexing="ij")
     cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
     ref = score_candidates_reference(field, 2, rows0, cols0, cand, 4)

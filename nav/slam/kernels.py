@@ -472,17 +472,16 @@ def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def block_scores(
-    grid: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, lo: int, nb: int, step: int
+    grid: np.ndarray, phase: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, lo: int, nb: int, step: int
 ) -> np.ndarray:
     """(A, nb, nb) float32 scores of the whole top level of a coarse-to-fine search: at angle
     ``a`` the block offset (lo + j, lo + k) in units of ``step`` cells; the same sums, bit for
     bit, as :func:`score_candidates` over all (a, j, k), accumulated point by point on the grid's
-    phases (Olson's layout, :func:`_block_sums`)."""
+    phases (Olson's layout, :func:`_block_sums`). ``phase`` is :func:`phase_split` of ``grid`` at
+    ``step``: always worth it, as reading a large submap in place ``step`` cells apart (loop
+    closure, step 16) missed the cache on nearly every read (a cold FR079 submap, 81 angles: ~1.0
+    -> ~0.7 ms); the caller may keep it (``LikelihoodField.phase``) while the grid is unchanged."""
     na, n = rows0.shape
-    # splitting copies the grid once (a sequential pass, ~0.5 ns a cell): always worth it, as
-    # reading a large submap in place ``step`` cells apart (loop closure, step 16) missed the
-    # cache on nearly every read (a cold FR079 submap, 81 angles: ~1.0 -> ~0.7 ms)
-    phase = phase_split(grid, step)
     out = np.empty((na, nb, nb), dtype=np.float32)
     part = np.empty((8, nb, nb), dtype=np.float32)
     nf = np.float32(n)

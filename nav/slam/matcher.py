@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.slam import kernels
+from nav.slam.branch_and_bound import branch_and_bound_search
 from nav.slam.field import LikelihoodField
 from nav.types import Pose2D, wrap_angle
 
@@ -43,6 +44,10 @@ class SearchWindow:
     """Candidates kept per level when ``levels > 0``."""
     max_points: int = 100
     """The search scores at most this many points (evenly thinned); refinement uses all."""
+    branch_and_bound: bool = False
+    """With ``levels > 0`` and no runner-up asked: depth-first branch-and-bound over the ``levels``
+    pooled fields (:mod:`nav.slam.branch_and_bound`), which returns the exhaustive search's
+    result, instead of the beam (which keeps ``beam`` candidates a level and may miss it)."""
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,7 @@ class RefineOptions:
 
 
 _NO_BOUND = np.zeros((0, 0), dtype=np.float32)  # exhaustive_search without angle bounds
+_NO_INCUMBENT = np.zeros(0, dtype=np.int64)  # branch_and_bound_search from scratch
 
 
 @functools.lru_cache(maxsize=64)
@@ -94,11 +100,17 @@ def score_candidates_reference(
 
 
 def correlative_search(
-    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow
+    field: LikelihoodField,
+    pts: np.ndarray,
+    prior: Pose2D,
+    window: SearchWindow,
+    incumbent: tuple[Pose2D, float] | None = None,
 ) -> tuple[Pose2D, float]:
     """Best pose (on the search lattice) of points ``pts`` (N, 2, robot frame) in ``field``'s frame
-    and its score (mean field value, 0..1)."""
-    pose, score, _ = correlative_search_runner_up(field, pts, prior, window, math.inf)
+    and its score (mean field value, 0..1). ``incumbent``: a pose of this search's lattice and its
+    score from the search of a window nested in this one (:func:`nested`), where a branch-and-bound
+    search starts (same result, fewer candidates visited); ignored by other searches."""
+    pose, score, _ = _correlative(field, pts, prior, window, math.inf, True, incumbent)
     return pose, score
 
 
@@ -127,8 +139,10 @@ def _correlative(
     window: SearchWindow,
     separation: float,
     compiled: bool,
+    incumbent: tuple[Pose2D, float] | None = None,
 ) -> tuple[Pose2D, float, float]:
-    """The correlative search, scored by the numba kernels (``compiled``) or by numpy."""
+    """The correlative search, scored by the numba kernels (``compiled``) or by numpy.
+    ``incumbent``: see :func:`correlative_search`."""
     if pts.shape[0] == 0:
         raise ScanMatchError("no points to match")
     if pts.shape[0] > window.max_points:
@@ -160,7 +174,26 @@ def _correlative(
         )
         pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
         return pose, float(best), float(runner_up)
-    top = window.levels
+    exact = window.branch_and_bound and separation == math.inf
+    if compiled and exact and window.levels > 0:
+        field.ensure_levels(window.levels)
+        seed, seed_score = _NO_INCUMBENT, -1.0
+        if incumbent is not None:
+            pose, seed_score = incumbent
+            seed = np.array(
+                (
+                    na + round(float(wrap_angle(pose.theta - prior.theta)) / window.angular_step),
+                    round((pose.y - prior.y) / res),
+                    round((pose.x - prior.x) / res),
+                ),
+                dtype=np.int64,
+            )
+        a, dy, dx, best = branch_and_bound_search(
+            tuple(field.pooled[: window.levels + 1]), rows0, cols0, wc, seed, seed_score
+        )
+        pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+        return pose, best, 0.0
+    top = 0 if exact else window.levels  # the reference of branch-and-bound: the exhaustive search
     field.ensure_levels(top)
     s = 1 << top
     blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
@@ -181,7 +214,9 @@ def _correlative(
         elif level < top:
             score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
         else:  # every (angle, block) of the top level, in `cand`'s order
-            score = kernels.block_scores(field.pooled[top], rows0, cols0, int(blocks[0]), len(blocks), s)
+            score = kernels.block_scores(
+                field.pooled[top], field.phase(top), rows0, cols0, int(blocks[0]), len(blocks), s
+            )
             score = score.ravel()
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
@@ -392,10 +427,25 @@ def match_scan_with_fallback(
 ) -> tuple[Pose2D, float]:
     """:func:`match_scan` in ``window``; a match scoring below ``minimum_score`` is searched again
     in ``wide_window`` (the prior may be outside the narrow one: slip, a fast turn) and the better
-    of the two kept (the SLAM front end's ``wide_search_minimum_score``)."""
-    pose, score = match_scan(field, pts, prior, window, refine)
+    of the two kept (the SLAM front end's ``wide_search_minimum_score``). A branch-and-bound wide
+    search starts from the narrow search's best when the narrow window is nested in it."""
+    coarse, coarse_score = correlative_search(field, pts, prior, window)
+    pose, score = refine_pose(field, pts, coarse, coarse, refine)
     if score < minimum_score:
-        wide_pose, wide_score = match_scan(field, pts, prior, wide_window, refine)
+        seed = (coarse, coarse_score) if nested(window, wide_window) else None
+        wide_coarse, _ = correlative_search(field, pts, prior, wide_window, seed)
+        wide_pose, wide_score = refine_pose(field, pts, wide_coarse, wide_coarse, refine)
         if wide_score > score:
             pose, score = wide_pose, wide_score
     return pose, score
+
+
+def nested(inner: SearchWindow, outer: SearchWindow) -> bool:
+    """Whether every candidate of ``inner`` is one of ``outer`` scored the same (same angle step
+    and points, smaller windows, the same prior and field)."""
+    return (
+        inner.angular_step == outer.angular_step
+        and inner.max_points == outer.max_points
+        and inner.linear_search_window <= outer.linear_search_window
+        and inner.angular_search_window <= outer.angular_search_window
+    )
