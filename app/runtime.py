@@ -39,7 +39,7 @@ class Runtime:
     maps: MapStore
     session: Session
     lease: ControlLease = field(default_factory=ControlLease)
-    viewer: object | None = None
+    viewer: Viewer | None = None
     world_name: str | None = None
     robot_id: int | None = None  # this robot's row in the robots table (app/robots.py)
     active_map_id: int | None = None  # the map set by localization or activation (None: the world's)
