@@ -35,6 +35,7 @@ from app.limits import (
     sanity_check,
 )
 from app.modes import LIDAR_MODES, Mode, ModeMachine, no_lidar_reason
+from app.odometry_history import OdometryHistory
 from nav.types import ZERO_TWIST, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from robot.base import Driver, LinkState, SensorFrame
 from robot.clock import Clock, RealClock
@@ -73,6 +74,7 @@ class SessionOptions:
     lidar_timeout: float = 1.5  # s without a scan while moving the robot -> FAULT
     trail_length: int = 2000  # poses kept for the odometry trail
     trail_min_step: float = 0.02  # m between trail points
+    odom_history: float = 2.0  # s of (stamp, odom pose) kept to pair scans with odometry at their stamp
     faults: FaultMonitorOptions = field(default_factory=FaultMonitorOptions)  # garbage/slip/imu/overrun
     # Nice value asked for the control-loop thread (Linux, per thread). Below 0 needs root or
     # CAP_SYS_NICE (systemd: AmbientCapabilities=CAP_SYS_NICE); without it the thread keeps the
@@ -156,6 +158,7 @@ class Session:
         self.map_to_odom = start_pose  # odom starts at the start pose until localization says otherwise
         self.pose = start_pose
         self.odom_pose = Pose2D()
+        self.odom_history = OdometryHistory(options.odom_history)  # (stamp, odom pose) of each update
         self.velocity = ZERO_TWIST
         self.wheel_slip = False
         self.last_command = ZERO_TWIST
@@ -451,6 +454,7 @@ class Session:
             prev = self.odom_pose
             odo = self.odometry.update(frame.ticks, frame.imu)
             self.odom_pose, self.velocity, self.wheel_slip = odo.pose, odo.twist, odo.slipping
+            self.odom_history.add(odo.stamp, odo.pose)
             self.distance_travelled += prev.distance_to(self.odom_pose)
             motion_fault = self.fault_monitor.check_motion(odo)
         self.pose = self.map_to_odom.compose(self.odom_pose)

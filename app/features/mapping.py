@@ -1,6 +1,7 @@
 """Feature: live graph SLAM while the operator drives (replaces Cartographer / slam_toolbox + Rviz2).
 
-In mode MAPPING every new scan and the wheel-odometry pose go to the SLAM front end
+In mode MAPPING every new scan and the wheel-odometry pose at the scan's stamp (interpolated in
+``session.odom_history``; the tick's own pose is up to a tick later) go to the SLAM front end
 (:meth:`nav.slam.GraphSlam.add_scan`, scan-to-submap matching); the back end (loop closure + sparse
 pose-graph optimization) and the re-rendering of the global map run on ``session.workers``, and the
 map is published with ``session.set_grid`` about once a second (source A's 1 s map update period).
@@ -140,6 +141,7 @@ class Mapping:
         self._last_optimize_ms: float | None = None
         self._grid: OccupancyGrid | None = None
         self.front_end_ms: float | None = None
+        self.scans_older_than_odometry = 0  # scans stamped before the odometry history: oldest pose used
         self.run_id_source: Callable[[], int | None] | None = None  # the recorder's current run
         self.run_id: int | None = None  # the recorded run of the last mapping session
         self.saved_map_id: int | None = None  # stored from this session's map (same map frame)
@@ -277,7 +279,7 @@ class Mapping:
         scan = frame.scan
         if scan is not None and scan is not self._last_scan:
             self._last_scan = scan
-            item = (slam, scan, session.odom_pose)
+            item = (slam, scan, self._odom_at(session, scan.stamp))
             if self.synchronous:
                 self._front_end(*item)
             else:
@@ -295,6 +297,16 @@ class Mapping:
                 self._apply(self._background(slam, optimize))
             else:
                 self._submit(slam, optimize)
+
+    def _odom_at(self, session: Session, stamp: float) -> Pose2D:
+        """The odometry pose at the scan's stamp (not the tick's, which is later: issue 18)."""
+        found = session.odom_history.pose_at(stamp)
+        if found is None:  # no odometry update yet
+            return session.odom_pose
+        pose, older = found
+        if older:
+            self.scans_older_than_odometry += 1
+        return pose
 
     def _optimize_due(self, slam: GraphSlam, now: float) -> bool:
         new = slam.num_nodes - self._nodes_at_optimize
@@ -415,6 +427,7 @@ class Mapping:
             else round(self._last_optimize_ms, 1),
             "front_end_ms": None if self.front_end_ms is None else round(self.front_end_ms, 2),
             "scans_dropped": self._slot.replaced,
+            "scans_older_than_odometry": self.scans_older_than_odometry,
         }
 
     def snapshot_fields(self, session: Session) -> dict[str, Any] | None:

@@ -29,6 +29,9 @@ class MappingOut(Out):
     last_optimization_ms: float | None = Field(description="ms")
     front_end_ms: float | None = Field(description="ms per scan")
     scans_dropped: int
+    scans_older_than_odometry: int = Field(
+        description="scans stamped before the odometry history kept: paired with its oldest pose"
+    )
 
 
 MappingDep = Annotated[Mapping, Depends(feature_dependency(Mapping))]
