@@ -7,9 +7,9 @@ import math
 
 import numpy as np
 import pytest
+from slam_worlds import box_world_grid, plateau_field
 
 from bench import peers
-from nav.grid import LogOddsGrid, LogOddsOptions
 from nav.slam.field import LikelihoodField
 from nav.slam.matcher import (
     SearchWindow,
@@ -17,29 +17,14 @@ from nav.slam.matcher import (
     correlative_search_reference,
     nested,
 )
-from nav.slam.synthetic import box_world, cast_scan
 from nav.slam.system import SlamOptions
 from nav.types import Pose2D
-
-TRUTH = Pose2D(3.0, 2.0, 0.4)
 
 
 def _world(seed: int) -> tuple[LikelihoodField, np.ndarray]:
     """The field of one noisy box-world scan's grid, and another noisy scan of the same place."""
-    grid, res = box_world()
-    rng = np.random.default_rng(seed)
-    g = LogOddsGrid(LogOddsOptions(resolution=0.05))
-    g.insert_scan(Pose2D(), cast_scan(grid, res, TRUTH, 360, noise=0.01, rng=rng).points(), np.zeros((0, 2)))
-    return LikelihoodField.from_grid(g), cast_scan(grid, res, TRUTH, 360, noise=0.01, rng=rng).points()
-
-
-def _plateau(seed: int) -> LikelihoodField:
-    """Few distinct values in flat blocks: many candidates score exactly the same (ties)."""
-    rng = np.random.default_rng(seed)
-    coarse = rng.choice(
-        np.array([0.0, 0.25, 0.5, 1.0], dtype=np.float32), (12, 12), p=[0.55, 0.15, 0.15, 0.15]
-    )
-    return LikelihoodField(np.kron(coarse, np.ones((5, 5), dtype=np.float32)), np.zeros(2), 0.05)
+    g, pts = box_world_grid(seed)
+    return LikelihoodField.from_grid(g), pts
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -50,7 +35,7 @@ def test_branch_and_bound_equals_the_exhaustive_reference(seed: int, levels: int
     grid_pts = np.round(rng.uniform(0.2, 2.8, (60, 2)) / 0.05) * 0.05 - 1.5
     cases = [
         (field, pts, Pose2D(*rng.uniform([-0.3, -0.3, -0.2], [0.3, 0.3, 0.2]))),
-        (_plateau(seed), grid_pts, Pose2D(1.5, 1.5, rng.choice([0.0, 0.02]))),
+        (plateau_field(seed), grid_pts, Pose2D(1.5, 1.5, rng.choice([0.0, 0.02]))),
         # every candidate ties: only the tie-break (the prior itself) may win
         (
             LikelihoodField(np.full((80, 80), 0.5, dtype=np.float32), np.zeros(2), 0.05),

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from slam_worlds import box_world_grid, plateau_field
 
 from bench import peers
 from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
@@ -30,21 +31,10 @@ from nav.slam.synthetic import box_world, cast_scan
 from nav.slam.system import grazing_shortening
 from nav.types import Pose2D
 
-TRUTH = Pose2D(3.0, 2.0, 0.4)
-
-
-def _world_grid(seed: int) -> tuple[LogOddsGrid, np.ndarray]:
-    """A log-odds grid of one noisy box-world scan, and another noisy scan of the same place."""
-    grid, res = box_world()
-    rng = np.random.default_rng(seed)
-    g = LogOddsGrid(LogOddsOptions(resolution=0.05))
-    g.insert_scan(Pose2D(), cast_scan(grid, res, TRUTH, 360, noise=0.01, rng=rng).points(), np.zeros((0, 2)))
-    return g, cast_scan(grid, res, TRUTH, 360, noise=0.01, rng=rng).points()
-
 
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_compiled_field_equals_the_shifted_maxima_reference(seed: int) -> None:
-    g, _ = _world_grid(seed)
+    g, _ = box_world_grid(seed)
     field = LikelihoodField.from_grid(g, sigma=0.05)
     assert np.array_equal(field.field, field_reference(g.logodds > 0, 0.05, g.resolution))
     # incremental splat of new cells equals a rebuild with them occupied
@@ -88,7 +78,7 @@ def test_pairwise_float32_sum_is_numpys_sum_bit_for_bit() -> None:
 
 @pytest.mark.parametrize(("level", "n"), [(0, 150), (1, 100), (2, 100), (0, 5)])
 def test_compiled_candidate_scores_equal_the_reference(level: int, n: int) -> None:
-    g, _ = _world_grid(3)
+    g, _ = box_world_grid(3)
     field = LikelihoodField.from_grid(g, levels=2)
     rng = np.random.default_rng(level)
     # points partly off the grid too (those count 0 on both sides)
@@ -110,7 +100,7 @@ def test_compiled_candidate_scores_equal_the_reference(level: int, n: int) -> No
     [((0.06, -0.04, 0.05), (3.0, 10.0)), ((-0.03, 0.05, -0.03), (10.0, 40.0)), ((0.2, 0.1, 0.1), (0.5, 2.0))],
 )
 def test_compiled_refinement_equals_the_reference(offset: tuple[float, float, float], weights: tuple) -> None:
-    g, pts = _world_grid(4)
+    g, pts = box_world_grid(4)
     field = LikelihoodField.from_grid(g)
     opts = RefineOptions(translation_weight=weights[0], rotation_weight=weights[1])
     start = Pose2D(*offset)
@@ -122,7 +112,7 @@ def test_compiled_refinement_equals_the_reference(offset: tuple[float, float, fl
 
 
 def test_search_with_the_compiled_scores_finds_the_true_pose() -> None:
-    g, pts = _world_grid(5)
+    g, pts = box_world_grid(5)
     field = LikelihoodField.from_grid(g, levels=2)
     for levels in (0, 2):
         window = SearchWindow(0.3, math.radians(15), math.radians(0.5), levels=levels)
@@ -171,7 +161,7 @@ def test_compiled_ray_insertion_equals_the_reference(seed: int, margin: float, v
 
 @pytest.mark.parametrize(("seed", "max_points"), [(0, 100), (1, 100), (2, 200), (3, 100), (4, 6)])
 def test_compiled_exhaustive_search_equals_the_reference(seed: int, max_points: int) -> None:
-    g, pts = _world_grid(10 + seed)
+    g, pts = box_world_grid(10 + seed)
     field = LikelihoodField.from_grid(g)
     rng = np.random.default_rng(seed)
     prior = Pose2D(*rng.uniform([-0.08, -0.08, -0.1], [0.08, 0.08, 0.1]))
@@ -185,7 +175,7 @@ def test_compiled_exhaustive_search_equals_the_reference(seed: int, max_points: 
 
 @pytest.mark.parametrize("level", [1, 2, 4])
 def test_compiled_max_pooling_equals_the_reference(level: int) -> None:
-    g, _ = _world_grid(20)
+    g, _ = box_world_grid(20)
     field = LikelihoodField.from_grid(g, levels=level)
     assert np.array_equal(field.pooled[level], field.pooled_reference(level))
 
@@ -196,7 +186,7 @@ def test_compiled_max_pooling_equals_the_reference(level: int) -> None:
 def test_compiled_coarse_to_fine_search_equals_the_reference(
     levels: int, half_width: float, max_points: int
 ) -> None:
-    g, pts = _world_grid(30 + levels)
+    g, pts = box_world_grid(30 + levels)
     field = LikelihoodField.from_grid(g, levels=levels)
     prior = Pose2D(0.3, -0.2, math.radians(8))
     window = SearchWindow(half_width, math.radians(20), math.radians(0.5), levels, 48, max_points)
@@ -268,7 +258,7 @@ def test_search_bounds_cover_the_window_max_as_the_field_grows(half: int) -> Non
     # raised by splats at new cells and must stay at least the true window max
     rng = np.random.default_rng(half)
     pts = rng.uniform(-3, 4, (120, 2))
-    g, _ = _world_grid(40 + half)
+    g, _ = box_world_grid(40 + half)
     for field in (LikelihoodField.from_points(pts, 0.05), LikelihoodField.from_grid(g)):
         bound = field.window_max(half)
         exact = field.window_max_reference(half)
@@ -282,15 +272,6 @@ def test_search_bounds_cover_the_window_max_as_the_field_grows(half: int) -> Non
         assert bound.max() == 1.0
 
 
-def _plateau_field(seed: int) -> LikelihoodField:
-    """A field of few distinct values in flat blocks: many candidates score exactly the same."""
-    rng = np.random.default_rng(seed)
-    coarse = rng.choice(
-        np.array([0.0, 0.25, 0.5, 1.0], dtype=np.float32), (12, 12), p=[0.55, 0.15, 0.15, 0.15]
-    )
-    return LikelihoodField(np.kron(coarse, np.ones((5, 5), dtype=np.float32)), np.zeros(2), 0.05)
-
-
 @pytest.mark.parametrize("seed", range(8))
 def test_angle_pruned_exhaustive_search_equals_the_reference(seed: int) -> None:
     # the bound-pruned search (no runner-up asked) against the numpy search over every candidate,
@@ -298,9 +279,9 @@ def test_angle_pruned_exhaustive_search_equals_the_reference(seed: int) -> None:
     # where exact ties between candidates (broken by the distance to the prior, then the order)
     # are the rule
     rng = np.random.default_rng(100 + seed)
-    g, pts = _world_grid(50 + seed)
+    g, pts = box_world_grid(50 + seed)
     world = LikelihoodField.from_grid(g)
-    plateau = _plateau_field(seed)
+    plateau = plateau_field(seed)
     flat = LikelihoodField(np.full((80, 80), 0.5, dtype=np.float32), np.zeros(2), 0.05)
     grid_pts = np.round(rng.uniform(0.2, 2.8, (60, 2)) / 0.05) * 0.05 - 1.5
     cases = [
