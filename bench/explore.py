@@ -102,7 +102,9 @@ def compare(built: OccupancyGrid, world, map_in_world: Pose2D, start: Pose2D) ->
     vals = np.full(rows.size, -1, dtype=np.int16)
     vals[inside] = built.data[br[inside], bc[inside]]
     known_free = (vals >= 0) & (vals <= FREE_MAX)
-    near_wall = ndimage.binary_dilation(world.static_occupied, structure=np.ones((3, 3), bool))
+    # within one cell of a wall, on the world grid with a one-cell border of open ground (below)
+    near_wall_b = ndimage.binary_dilation(np.pad(world.static_occupied, 1), structure=np.ones((3, 3), bool))
+    near_wall = near_wall_b[1:-1, 1:-1]
     # A free cell at a wall's face often lies, on the map's offset and rotated lattice, in a cell that
     # also covers the wall, and such a cell is occupied (nav/slam/render.py, surface wins; apartment:0:
     # 1180 of the 1456 free cells next to a wall): it is mapped as the wall's face, which the
@@ -120,7 +122,6 @@ def compare(built: OccupancyGrid, world, map_in_world: Pose2D, start: Pose2D) ->
     # its 6175 disagreeing cells). A cell further out, or free out there, is still wrong.
     interior, _ = _world_free_and_exterior(world.static_occupied)
     interior_b = np.pad(interior, 1)
-    near_wall_b = ndimage.binary_dilation(np.pad(world.static_occupied, 1), structure=np.ones((3, 3), bool))
     wr, wc = wr + 1, wc + 1
     ok = (wr >= 0) & (wr < interior_b.shape[0]) & (wc >= 0) & (wc < interior_b.shape[1])
     wr, wc = np.clip(wr, 0, interior_b.shape[0] - 1), np.clip(wc, 0, interior_b.shape[1] - 1)
