@@ -10,10 +10,15 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import make_settings
+from scipy import ndimage
 
 from app.cli import main
 from app.commands.sim_nav import SimStack, build_sim_stack, unknown_grid
+from app.features import localization, mapping, navigation
 from app.features.navigation import GoalRejected
+from app.modes import Mode
+from app.runtime import Runtime
 from bench.scenarios.forest import PROFILE, forest_trial
 from nav.control import GoalChecker, ProgressChecker
 from nav.control.errors import ControllerError
@@ -23,6 +28,7 @@ from nav.navigator import Navigator, NavState
 from nav.planning import AStarPlanner, NoValidPathFound, PlannerOptions
 from nav.types import (
     FREE_SPACE,
+    INSCRIBED_INFLATED_OBSTACLE,
     LETHAL_OBSTACLE,
     NO_INFORMATION,
     ZERO_TWIST,
@@ -35,6 +41,7 @@ from nav.types import (
 from nav.types import (
     Path as NavPath,
 )
+from robot.clock import VirtualClock
 from robot.sim import World
 
 
@@ -71,6 +78,35 @@ def test_goal_in_unknown_space_refused_unless_allowed() -> None:
         assert rid > 0
     finally:
         st.session.close()
+
+
+def test_view_click_sets_a_goal_in_unknown_space_while_mapping(tmp_path: Path) -> None:
+    """Navigate while mapping from the 3D view: a plain goal click in space the live map has not
+    seen is refused; the "goal in unknown space" click (Nav2's allow_unknown goal) is accepted."""
+    rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
+    try:
+        for mod in (localization, mapping, navigation):  # Runtime.start's wiring, no wall-clock thread
+            rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+        nav = rt.feature(navigation.Navigation)
+        rt.feature(mapping.Mapping).start()
+        while not nav.mapping_live():
+            rt.session.run_for(rt.session.period)
+        cm = nav.global_costmap
+        assert cm is not None
+        lethal = (cm.costs == LETHAL_OBSTACLE) | (cm.costs == INSCRIBED_INFLATED_OBSTACLE)
+        clear = ndimage.distance_transform_edt(~lethal) * np.where(cm.costs == NO_INFORMATION, 1.0, 0.0)
+        r, c = np.unravel_index(int(np.argmax(clear)), clear.shape)  # unknown, far from any obstacle
+        x, y = cm.geometry.cell_to_world(np.array([r]), np.array([c]))[0]
+        goal = Pose2D(float(x), float(y), 0.0)
+
+        assert "unknown space" in (rt.on_pose_input("goal", goal) or "")
+        assert rt.on_pose_input("goal_unknown", goal) is None
+        rt.session.run_for(0.2)
+        (queued,) = nav.state()["goals"]
+        assert (queued["x"], queued["y"]) == pytest.approx((goal.x, goal.y), abs=1e-3)
+        assert rt.session.modes.mode == Mode.MAPPING  # navigating while mapping stays one session
+    finally:
+        rt.close()
 
 
 def test_unknown_cost_is_the_operators() -> None:

@@ -295,9 +295,12 @@ def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: Embedde
     lit_a = view_luma(page)
     box_a.uncheck()
     assert wait_until(page, lambda: not viewer.is_shown("/map", tab_a), timeout=15)
+    picker = page.frame_locator("#viewer").get_by_role("combobox", name="Click sets")
+    page.get_by_label("goal in unknown space", exact=True).check()  # navigating while mapping
+    assert wait_until(page, lambda: viewer.click_kind(tab_a) == "goal_unknown", timeout=15)
+    assert wait_until(page, lambda: picker.input_value() == "goal in unknown space", timeout=15)
     page.get_by_label("initial pose", exact=True).check()
     assert wait_until(page, lambda: viewer.click_kind(tab_a) == "initial_pose", timeout=15)
-    picker = page.frame_locator("#viewer").get_by_role("combobox", name="Click sets")
     assert wait_until(page, lambda: picker.input_value() == "initial pose", timeout=15)  # A's view follows
     page.wait_for_timeout(1500)
     dark_a = view_luma(page)

@@ -33,6 +33,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import Future
 from dataclasses import dataclass, field, replace
 from enum import StrEnum
+from functools import partial
 from typing import TYPE_CHECKING, Any, Literal, Protocol
 
 import numpy as np
@@ -571,8 +572,8 @@ class Navigation:
         reason = {
             LETHAL_OBSTACLE: "inside an obstacle",
             INSCRIBED_INFLATED_OBSTACLE: "inside the inscribed radius of an obstacle",
-            NO_INFORMATION: "in unknown space (allow_unknown is off: send allow_unknown: true with the "
-            "goal or set allow_unknown_goals)",
+            NO_INFORMATION: "in unknown space (allow_unknown is off: in the 3D view click a \"goal in "
+            "unknown space\", or send allow_unknown: true with the goal, or set allow_unknown_goals)",
         }.get(cost)
         if cost == NO_INFORMATION and (
             self.options.allow_unknown_goals if allow_unknown is None else allow_unknown
@@ -657,21 +658,28 @@ class Navigation:
         self._announce(goals if extends is None else goals[-1:])
         return rid
 
-    def add_goal(self, goal: Pose2D) -> None:
+    def add_goal(self, goal: Pose2D, allow_unknown: bool | None = None) -> None:
         """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle.
-        Extends the current request (same id, its earlier goals are not announced again)."""
+        Extends the current request (same id, its earlier goals are not announced again).
+        ``allow_unknown`` as in ``set_goals`` (the view's "goal in unknown space" click)."""
         with self._lock:
             requests = [arg for kind, arg in self._pending if kind == "goals"]
         if requests:  # not picked up by the loop yet: extend the latest one
             goals, controller, rid, actor, *_ = requests[-1]
-            self._submit([*goals, goal], controller, actor, extends=rid)
+            self._submit([*goals, goal], controller, actor, extends=rid, allow_unknown=allow_unknown)
             return
         req = self._request
         if self._active and req is not None:
             current = self.navigator.goals[self._goal_index() :]
-            self._submit([*current, goal], self.navigator.controller_name, "operator", extends=req.id)
+            self._submit(
+                [*current, goal],
+                self.navigator.controller_name,
+                "operator",
+                extends=req.id,
+                allow_unknown=allow_unknown,
+            )
             return
-        self.set_goals([goal])
+        self.set_goals([goal], allow_unknown=allow_unknown)
 
     def _goal_index(self) -> int:
         tick = self._last_tick
@@ -1279,4 +1287,6 @@ def setup(runtime: Runtime) -> Navigation | None:
         mapping.add_grid_listener(nav.on_live_map)
     runtime.session.add_stage(nav)
     runtime.pose_input_handlers["goal"] = nav.add_goal
+    # navigate while mapping: a click beyond what the map has seen (Nav2's allow_unknown goal)
+    runtime.pose_input_handlers["goal_unknown"] = partial(nav.add_goal, allow_unknown=True)
     return nav

@@ -58,7 +58,7 @@ log = logging.getLogger(__name__)
 
 PoseInputCallback = Callable[[str, Pose2D, str], "str | None"]
 """(kind, pose, tab token) -> the reason it was refused, or None when it was taken."""
-POSE_KINDS = {"goal": "goal", "initial pose": "initial_pose"}
+POSE_KINDS = {"goal": "goal", "goal in unknown space": "goal_unknown", "initial pose": "initial_pose"}
 KIND_LABELS = {kind: label for label, kind in POSE_KINDS.items()}
 
 HIDDEN_BY_DEFAULT = frozenset({"/costmap"})
@@ -486,7 +486,7 @@ class Viewer:
             self._refresh_client(view, node)
 
     def click_kind(self, tab: str = DEFAULT_TAB) -> str:
-        """What a click in ``tab``'s view sets: "goal" or "initial_pose"."""
+        """What a click in ``tab``'s view sets: "goal", "goal_unknown" or "initial_pose"."""
         return self.tabs.tab(tab).kind
 
     def set_click_kind(self, tab: str, kind: str) -> None:
@@ -892,7 +892,7 @@ class Viewer:
             return
         tab = self.tabs.tab_of_client(getattr(event, "client_id", None))
         kind = self.click_kind(tab)
-        theta = heading_towards(self._pose, xy) if kind == "goal" else self._pose.theta
+        theta = self._pose.theta if kind == "initial_pose" else heading_towards(self._pose, xy)
         self._emit(tab, kind, Pose2D(float(xy[0]), float(xy[1]), theta))
 
     def _bind_tile_drag(self, tile: viser.ImageHandle) -> None:

@@ -109,7 +109,9 @@ export function init() {
         const stops = draft.map((g) => (g.place ? g.place : { x: g.x, y: g.y, theta: g.theta }));
         await api("POST", "/api/routes/run", patrol ? { stops, patrol } : { stops, repeat });
       } else {
-        await api("POST", "/api/navigation/goals", draft.length === 1 ? draft[0] : draft);
+        // Nav2's allow_unknown goal: the server refuses a waypoint in unknown space unless asked
+        const goals = $("#goals-unknown").checked ? draft.map((g) => ({ ...g, allow_unknown: true })) : draft;
+        await api("POST", "/api/navigation/goals", goals.length === 1 ? goals[0] : goals);
       }
       const times = patrol ? " as a patrol" : repeat > 1 ? ` × ${repeat}` : "";
       message(`navigating through ${draft.length} waypoint${draft.length > 1 ? "s" : ""}${times}`, "ok");

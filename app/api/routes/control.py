@@ -21,7 +21,7 @@ from app.viewer.scene import KIND_LABELS, Viewer
 
 router = APIRouter(tags=["control"])
 
-ClickKind = Literal["goal", "initial_pose"]
+ClickKind = Literal["goal", "goal_unknown", "initial_pose"]
 """What a click in the 3D view sets (the view's own pose kinds, ``KIND_LABELS``)."""
 assert set(ClickKind.__args__) == set(KIND_LABELS)  # type: ignore[attr-defined]
 
@@ -135,7 +135,8 @@ def _viewer(viewer: Viewer | None) -> Viewer:
 @router.get(
     "/api/viewer/click_mode",
     response_model=ClickModeOut,
-    summary="What a click in one browser tab's 3D view sets: goal or initial_pose",
+    summary="What a click in one browser tab's 3D view sets: goal, goal_unknown (a goal that may lie in "
+    "unknown space) or initial_pose",
     responses=NO_VIEW,
 )
 def get_click_mode(
