@@ -146,7 +146,7 @@ def test_relay_streams_scene_and_click_reaches_callback(viewer: Viewer) -> None:
     with Served(viewer) as served:
         first, later = asyncio.run(session())
         names = {m.get("name") for m in first}
-        assert "/robot" in names and "/robot/scan" in names
+        assert "/robot" in names and "/scan" in names
         assert {f"/map/tile_{r}_{c}" for r in range(4) for c in range(5)} <= names
         assert any(m["type"] == "ReplayDoneMessage" for m in first)
         assert any(m["type"] == "ImageMessage" and m["name"] == "/map/tile_0_0" for m in first)

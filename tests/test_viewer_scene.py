@@ -72,11 +72,13 @@ def test_layers_follow_snapshot(viewer: Viewer) -> None:
     assert robot is not None
     np.testing.assert_allclose(robot.position, (1.0, 2.0, 0.0))
     np.testing.assert_allclose(robot.wxyz, (math.cos(0.25), 0, 0, math.sin(0.25)), atol=1e-9)
-    bands = [s.get_handle_by_name(f"/robot/scan/band_{i}") for i in range(len(palette.SCAN_BANDS))]
+    bands = [s.get_handle_by_name(f"/scan/band_{i}") for i in range(len(palette.SCAN_BANDS))]
     scan_pts = np.concatenate([b.points for b in bands])
     assert scan_pts.shape == (360 - 36 - 1, 3)  # inf and nan dropped
     assert [len(b.points) for b in bands] == [0, 0, 360 - 36 - 1]  # all at 2 m: the far band
-    np.testing.assert_allclose(np.hypot(scan_pts[:, 0], scan_pts[:, 1]), 2.0, atol=1e-5)
+    # in the map frame around the robot at (1, 2) (not under /robot: a browser applying points late
+    # must not turn them with the robot)
+    np.testing.assert_allclose(np.hypot(scan_pts[:, 0] - 1.0, scan_pts[:, 1] - 2.0), 2.0, atol=1e-5)
     assert s.get_handle_by_name("/robot/footprint").points.shape == (4, 2, 3)
     np.testing.assert_allclose(s.get_handle_by_name("/robot/body").dimensions, (0.24, 0.20, 0.08))
     assert s.get_handle_by_name("/trail").points.shape == (19, 2, 3)
@@ -86,7 +88,7 @@ def test_layers_follow_snapshot(viewer: Viewer) -> None:
     np.testing.assert_allclose(arrows[:, 0, :2], particles[:, :2], atol=1e-5)
     assert len(viewer.map_layer.tile_names) == 20  # 600x400 cells in 128-cell tiles: 5 x 4
     assert all(s.get_handle_by_name(n) is not None for n in viewer.map_layer.tile_names)
-    for node in ("/map", "/robot/scan", "/trail", "/plan/global", "/particles"):
+    for node in ("/map", "/scan", "/trail", "/plan/global", "/particles"):
         assert viewer.is_shown(node), node
     for node in ("/costmap", "/plan/local", "/goal", "/graph/edges"):
         assert not viewer.is_shown(node), node
@@ -94,8 +96,8 @@ def test_layers_follow_snapshot(viewer: Viewer) -> None:
     # Next tick: the pose and scan move, the optional layers go away -> hidden, never removed.
     viewer.apply(snap(1, pose=Pose2D(-1.0, 0.5, -1.0), scan=make_scan(r=3.0), grid=grid, grid_version=1))
     np.testing.assert_allclose(robot.position, (-1.0, 0.5, 0.0))
-    pts = s.get_handle_by_name(f"/robot/scan/band_{len(palette.SCAN_BANDS) - 1}").points
-    np.testing.assert_allclose(np.hypot(pts[:, 0], pts[:, 1]), 3.0, atol=1e-5)
+    pts = s.get_handle_by_name(f"/scan/band_{len(palette.SCAN_BANDS) - 1}").points
+    np.testing.assert_allclose(np.hypot(pts[:, 0] + 1.0, pts[:, 1] - 0.5), 3.0, atol=1e-5)
     for node in ("/trail", "/plan/global", "/particles"):
         assert not viewer.is_shown(node)
         assert s.get_handle_by_name(node) is not None
@@ -409,15 +411,16 @@ def test_scan_bands_by_range_with_fixed_colours(viewer: Viewer) -> None:
     """Points move between range bands; a band's colour array is never re-sent (in the browser a new
     colour array means a new material and a shader recompile on every scan)."""
     s = viewer.server.scene
-    bands = [s.get_handle_by_name(f"/robot/scan/band_{i}") for i in range(len(palette.SCAN_BANDS))]
+    bands = [s.get_handle_by_name(f"/scan/band_{i}") for i in range(len(palette.SCAN_BANDS))]
     colors_before = [b.colors for b in bands]
     ranges = np.array([0.3, 0.45, 1.0, 1.99, 2.5, 5.0, np.inf, 0.3])
     scan = LaserScan(0.0, 0.0, 0.1, ranges, 0.15, 6.0)
     viewer.apply(snap(scan=scan))
     assert [len(b.points) for b in bands] == [3, 2, 2]
-    np.testing.assert_allclose(
-        np.hypot(bands[0].points[:, 0], bands[0].points[:, 1]), [0.3, 0.45, 0.3], atol=1e-5
-    )
+    near = bands[0].points[:, :2] - (1.0, 2.0)  # the map frame, around the robot at (1, 2)
+    np.testing.assert_allclose(np.hypot(near[:, 0], near[:, 1]), [0.3, 0.45, 0.3], atol=1e-5)
+    # the first beam (angle 0) points along the robot's heading (0.5 rad), not the map's x axis
+    np.testing.assert_allclose(near[0], 0.3 * np.array([math.cos(0.5), math.sin(0.5)]), atol=1e-5)
     viewer.apply(snap(seq=1, scan=LaserScan(0.1, 0.0, 0.1, np.full(8, 3.0), 0.15, 6.0)))
     assert [len(b.points) for b in bands] == [0, 0, 8]
     for b, before, (_edge, rgb) in zip(bands, colors_before, palette.SCAN_BANDS, strict=True):

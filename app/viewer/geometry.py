@@ -83,8 +83,9 @@ def edge_segments(edges: np.ndarray, z: float = 0.0) -> np.ndarray:
 
 
 def scan_points(scan: LaserScan, laser_pose: Pose2D, z: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """Valid returns (inf / nan / out-of-range dropped, REP-117) as (N, 3) float32 points in base_link,
-    plus their (N,) ranges for colouring."""
+    """Valid returns (inf / nan / out-of-range dropped, REP-117) as (N, 3) float32 points in the frame
+    ``laser_pose`` is given in (the map: robot pose composed with the laser's mount), plus their (N,)
+    ranges for colouring."""
     mask = scan.valid_mask()
     r = scan.ranges[mask]
     a = scan.angles[mask]

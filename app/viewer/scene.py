@@ -67,7 +67,7 @@ HIDDEN_BY_DEFAULT = frozenset({"/costmap"})
 LAYERS: dict[str, str] = {
     "Map": "/map",
     "Costmap": "/costmap",
-    "Scan": "/robot/scan",
+    "Scan": "/scan",
     "Trail": "/trail",
     "Global path": "/plan/global",
     "Local trajectories": "/plan/local",
@@ -295,10 +295,13 @@ class Viewer:
             thickness=4.0,
             thickness_units="screen",
         )
-        h["/robot/scan"] = s.add_frame("/robot/scan", show_axes=False)
+        # The scan is drawn in the map frame (Rviz's fixed frame), not under /robot: viser's browser
+        # applies a node's pose at once but new points through a React re-render, which a busy browser
+        # runs seconds late; a late scan under /robot turned with the robot, off the walls it had seen.
+        h["/scan"] = s.add_frame("/scan", show_axes=False)
         for i, (_edge, rgb) in enumerate(palette.SCAN_BANDS):
-            h[f"/robot/scan/band_{i}"] = s.add_point_cloud(
-                f"/robot/scan/band_{i}",
+            h[f"/scan/band_{i}"] = s.add_point_cloud(
+                f"/scan/band_{i}",
                 np.zeros((0, 3), np.float32),
                 rgb,  # set once: a changed colour array costs a shader recompile in the browser
                 point_size=o.scan_point_size,
@@ -374,7 +377,7 @@ class Viewer:
         h["/map"] = self.map_layer.root
         h["/costmap"] = self.costmap_layer.root
         self._has_data = {name: False for name in LAYERS.values()}
-        self._has_data["/robot/scan"] = True  # shown empty until a scan arrives
+        self._has_data["/scan"] = True  # shown empty until a scan arrives
         # Like Rviz's default displays: the costmap overlay starts hidden (its checkbox starts off) so
         # the map stays readable. Layer visibility is sent to each client for its tab (tabs.py); the
         # shared nodes start hidden so a page shows nothing it has not been told to.
@@ -527,11 +530,11 @@ class Viewer:
 
         if snap.scan is not None and (snap.scan is not last.get("scan") or snap.laser_pose != last.get("lp")):
             last["scan"], last["lp"] = snap.scan, snap.laser_pose
-            pts, r = geo.scan_points(snap.scan, snap.laser_pose, o.scan_height)
+            pts, r = geo.scan_points(snap.scan, self._pose.compose(snap.laser_pose), o.scan_height)
             band = palette.scan_band(r)
             with self.server.atomic():
                 for i in range(len(palette.SCAN_BANDS)):
-                    h[f"/robot/scan/band_{i}"].points = pts[band == i]
+                    h[f"/scan/band_{i}"].points = pts[band == i]
 
         if snap.trail is not last.get("trail"):
             last["trail"] = snap.trail
