@@ -56,3 +56,33 @@ def test_patrol_legs_and_outcomes_in_the_goal_panel(browser, server: EmbeddedSer
         api.post("/api/navigation/cancel")
         ctx.close()
         api.close()
+
+
+def test_unknown_space_box_sends_the_waypoints_with_allow_unknown(browser, server: EmbeddedServer) -> None:
+    """Navigating while mapping from the panel: ticked, the waypoints go with Nav2's allow_unknown;
+    unticked, without it (the server then refuses a waypoint in unknown space)."""
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)
+    ctx.set_default_timeout(LONG)
+    page = ctx.new_page()
+    try:
+        page.goto(server.url + "/")
+        take = page.request.post(server.url + "/api/control/acquire", data={"take_over": True})
+        assert take.ok, take.text()
+        r = page.request.post(server.url + "/api/localization/initial_pose", data={"x": 3.0, "y": 3.5})
+        assert r.ok, r.text()
+        sent = []
+        for ticked in (False, True):
+            page.set_checked("#goals-unknown", ticked)
+            page.fill("#goal-form input[name=x]", "2.4")
+            page.fill("#goal-form input[name=y]", "3.5")
+            page.get_by_role("button", name="Add waypoint to the list").click()
+            with page.expect_request(
+                lambda req: req.url.endswith("/api/navigation/goals") and req.method == "POST"
+            ) as request:
+                page.get_by_role("button", name="Navigate through the waypoints").click()
+            sent.append(request.value.post_data_json)
+            page.request.post(server.url + "/api/navigation/cancel")
+        assert "allow_unknown" not in sent[0]
+        assert sent[1]["allow_unknown"] is True and (sent[1]["x"], sent[1]["y"]) == (2.4, 3.5)
+    finally:
+        ctx.close()
