@@ -46,6 +46,9 @@ BUCKET_WIDTH = 0.1
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 _DIAGONAL = np.array([0, 0, 0, 0, 1, 1, 1, 1], dtype=np.int64)
+# the same offsets as floats, for the heuristic (no int -> float conversion per neighbour)
+_DRF = _DR.astype(np.float64)
+_DCF = _DC.astype(np.float64)
 # the direction of (d_row, d_col), indexed by (d_row + 1) * 3 + d_col + 1
 _INDEX = np.full(9, -1, dtype=np.int64)
 for _k in range(8):
@@ -246,6 +249,11 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                                 n_succ += 2
             r = np.int64(un // np.uint64(w))
             c = node - r * w
+            # the octile heuristic of a neighbour from these, as ``octile_heuristic`` computes it
+            # (the same float operations on the same exact integers), but branch-free: near the
+            # start-goal diagonal which of |d_row| and |d_col| is larger flips from cell to cell
+            to_gr = float(r - gr)
+            to_gc = float(c - gc)
             gn = g[un]
             for j in range(n_succ):
                 k = successors[np.uint64(j)] if canonical else j
@@ -272,7 +280,9 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                     state[unb] = _CLOSED | (k << 2)  # never expanded: its cost is all the search needs
                     best = ng
                     continue
-                f = ng + heuristic_weight * octile_heuristic(r + dr, c + dc, gr, gc)
+                hr = abs(to_gr + _DRF[np.uint64(k)])
+                hc = abs(to_gc + _DCF[np.uint64(k)])
+                f = ng + heuristic_weight * (max(hr, hc) + (SQRT2 - 1.0) * min(hr, hc))
                 if f >= best:
                     state[unb] = _CLOSED | (k << 2)  # cannot lead to a cheaper goal path; g stays
                     continue
