@@ -247,7 +247,7 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                                     np.uint64((sdr + adr + 1) * 3 + sdc + adc + 1)
                                 ]
                                 n_succ += 2
-            r = np.int64(un // np.uint64(w))
+            r = np.int64(np.uint32(node) // np.uint32(w))  # ids < 2**31 (Workspace)
             c = node - r * w
             # the octile heuristic of a neighbour from these, as ``octile_heuristic`` computes it
             # (the same float operations on the same exact integers), but branch-free: near the
