@@ -33,7 +33,7 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2, octile_of_offsets
 from nav.planning.grid_search import _octile as octile_heuristic  # the heap kernel's, inlined
 from nav.planning.prefetch import prefetch
 
@@ -249,9 +249,7 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                                 n_succ += 2
             r = np.int64(np.uint32(node) // np.uint32(w))  # ids < 2**31 (Workspace)
             c = node - r * w
-            # the octile heuristic of a neighbour from these, as ``octile_heuristic`` computes it
-            # (the same float operations on the same exact integers), but branch-free: near the
-            # start-goal diagonal which of |d_row| and |d_col| is larger flips from cell to cell
+            # a neighbour's offset from the goal, as floats for ``octile_of_offsets``
             to_gr = float(r - gr)
             to_gc = float(c - gc)
             gn = g[un]
@@ -280,9 +278,8 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                     state[unb] = _CLOSED | (k << 2)  # never expanded: its cost is all the search needs
                     best = ng
                     continue
-                hr = abs(to_gr + _DRF[np.uint64(k)])
-                hc = abs(to_gc + _DCF[np.uint64(k)])
-                f = ng + heuristic_weight * (max(hr, hc) + (SQRT2 - 1.0) * min(hr, hc))
+                to_goal = octile_of_offsets(to_gr + _DRF[np.uint64(k)], to_gc + _DCF[np.uint64(k)])
+                f = ng + heuristic_weight * to_goal
                 if f >= best:
                     state[unb] = _CLOSED | (k << 2)  # cannot lead to a cheaper goal path; g stays
                     continue
