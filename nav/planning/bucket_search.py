@@ -152,8 +152,8 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
         _GROW) and, when FOUND, the path's (N, 2) cells.
 
         Every array index in the loop is cast to ``np.uint64``: numba wraps a negative signed index
-        around (a sign test and an add on each access, and registers the loop then spills), an
-        unsigned one it uses as it is. Every index here is a valid cell, bucket or direction id
+        around (a sign test and an add on each access, and the loop's registers then spill to the
+        stack), an unsigned one it uses as it is. Every index here is a valid cell, bucket or direction id
         (never negative), so the cast changes no result; measured 0.80-0.86x the CPU time on the
         2000 x 2000 random grid. The row is divided unsigned for the same reason (no floor fixup)."""
         w = passable.shape[1] + 2
