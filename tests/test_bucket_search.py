@@ -15,7 +15,7 @@ from bench.datasets import MOVINGAI
 from bench.peers import load_movingai_map, load_scenarios
 from nav.planning import kernel
 from nav.planning.bucket_search import BucketSearch, workspace_for
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SearchState
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SearchState, _octile, octile_of_offsets
 from nav.types import LETHAL_OBSTACLE
 
 SQRT2 = math.sqrt(2.0)
@@ -114,6 +114,19 @@ def test_start_in_a_blocked_cell_leaves_it_and_blocked_goal_is_unreachable() -> 
     assert octile_search(passable, (2, 2), (2, 4))[0] == pytest.approx(2.0)
     assert octile_search(passable, (0, 0), (2, 2))[0] == math.inf
     assert octile_search(passable, (2, 2), (2, 2))[0] == 0.0
+
+
+def test_branch_free_heuristic_is_the_heap_kernels_bit_for_bit() -> None:
+    # the kernel's heuristic must return _octile's float exactly (the golden digests depend on it),
+    # including the ties |d_row| == |d_col| and offsets far beyond any test grid
+    rng = np.random.default_rng(3)
+    far = rng.integers(-(2**30), 2**30, size=(2000, 2))
+    near = np.array([(r, c) for r in range(-40, 41) for c in range(-40, 41)])
+    for r, c in np.concatenate((near, far)):
+        r, c = int(r), int(c)
+        expected = _octile(r, c, 0, 0)
+        got = octile_of_offsets(float(r), float(c))
+        assert got == expected and math.copysign(1.0, got) == math.copysign(1.0, expected), (r, c)
 
 
 def test_bad_input_is_refused() -> None:

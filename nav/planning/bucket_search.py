@@ -33,7 +33,7 @@ from collections.abc import Callable
 import numpy as np
 from numba import njit
 
-from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2
+from nav.planning.grid_search import BUDGET, EXHAUSTED, FOUND, SQRT2, octile_of_offsets
 from nav.planning.grid_search import _octile as octile_heuristic  # the heap kernel's, inlined
 from nav.planning.prefetch import prefetch
 
@@ -46,6 +46,9 @@ BUCKET_WIDTH = 0.1
 _DR = np.array([-1, 1, 0, 0, -1, -1, 1, 1], dtype=np.int64)
 _DC = np.array([0, 0, -1, 1, -1, 1, -1, 1], dtype=np.int64)
 _DIAGONAL = np.array([0, 0, 0, 0, 1, 1, 1, 1], dtype=np.int64)
+# the same offsets as floats, for the heuristic (no int -> float conversion per neighbour)
+_DRF = _DR.astype(np.float64)
+_DCF = _DC.astype(np.float64)
 # the direction of (d_row, d_col), indexed by (d_row + 1) * 3 + d_col + 1
 _INDEX = np.full(9, -1, dtype=np.int64)
 for _k in range(8):
@@ -146,7 +149,13 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
         ``buckets`` (a ring of LIFO stacks of cell ids) and ``counts`` hold the open list; a cell may
         sit in several stacks (its f dropped): only a pop that finds it open expands it.
         ``best_out[0]`` is the goal's cost so far. Returns the status (FOUND, EXHAUSTED, BUDGET or
-        _GROW) and, when FOUND, the path's (N, 2) cells."""
+        _GROW) and, when FOUND, the path's (N, 2) cells.
+
+        Every array index in the loop is cast to ``np.uint64``: numba wraps a negative signed index
+        around (a sign test and an add on each access, and the loop's registers then spill to the
+        stack), an unsigned one it uses as it is. Every index here is a valid cell, bucket or direction id
+        (never negative), so the cast changes no result; measured 0.80-0.86x the CPU time on the
+        2000 x 2000 random grid. The row is divided unsigned for the same reason (no floor fixup)."""
         w = passable.shape[1] + 2
         n_buckets = counts.shape[0]
         mask = n_buckets - 1
@@ -179,7 +188,7 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
         n_succ = 8
         while live > 0:
             slot = b & mask
-            top = counts[slot]
+            top = counts[np.uint64(slot)]
             if top == 0:
                 b += 1
                 continue
@@ -194,27 +203,28 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                     status = _GROW
                     break
             top -= 1
-            counts[slot] = top
+            counts[np.uint64(slot)] = top
             live -= 1
-            node = buckets[slot, top]
+            node = buckets[np.uint64(slot), np.uint64(top)]
             if top > 0:  # the next pop, unless this expansion pushes onto the same stack
-                ahead = buckets[slot, top - 1]
+                ahead = buckets[np.uint64(slot), np.uint64(top - 1)]
                 prefetch(state, ahead)
                 prefetch(g, ahead)
                 prefetch(state, ahead - w)
                 prefetch(state, ahead + w)
                 prefetch(g, ahead - w)
                 prefetch(g, ahead + w)
-            byte = state[node]
+            un = np.uint64(node)
+            byte = state[un]
             if byte & 3 != _OPEN:
                 continue  # expanded already from a lower bucket (this entry is stale)
-            state[node] = byte + 1  # closed, the direction kept
+            state[un] = byte + 1  # closed, the direction kept
             done += 1
             if canonical:  # the successors the pruning rules leave (canonical_search)
-                arrived = byte >> 2
+                arrived = np.uint64(byte >> 2)
                 if arrived == _START:
                     for k in range(8):
-                        successors[k] = k
+                        successors[np.uint64(k)] = k
                     n_succ = 8
                 else:
                     adr = _DR[arrived]
@@ -222,8 +232,8 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                     successors[0] = arrived
                     n_succ = 1
                     if _DIAGONAL[arrived]:
-                        successors[1] = _INDEX[(adr + 1) * 3 + 1]
-                        successors[2] = _INDEX[3 + adc + 1]
+                        successors[1] = _INDEX[np.uint64((adr + 1) * 3 + 1)]
+                        successors[2] = _INDEX[np.uint64(3 + adc + 1)]
                         n_succ = 3
                     else:
                         d = adr * w + adc
@@ -231,47 +241,56 @@ def _make_search(canonical: bool) -> Callable[..., tuple[int, np.ndarray]]:
                             sdr = side * adc  # perpendicular to (adr, adc)
                             sdc = side * adr
                             s = node + sdr * w + sdc
-                            if state[s] != _BLOCKED and state[s - d] == _BLOCKED:
-                                successors[n_succ] = _INDEX[(sdr + 1) * 3 + sdc + 1]
-                                successors[n_succ + 1] = _INDEX[(sdr + adr + 1) * 3 + sdc + adc + 1]
+                            if state[np.uint64(s)] != _BLOCKED and state[np.uint64(s - d)] == _BLOCKED:
+                                successors[np.uint64(n_succ)] = _INDEX[np.uint64((sdr + 1) * 3 + sdc + 1)]
+                                successors[np.uint64(n_succ + 1)] = _INDEX[
+                                    np.uint64((sdr + adr + 1) * 3 + sdc + adc + 1)
+                                ]
                                 n_succ += 2
-            r = node // w
+            r = np.int64(np.uint32(node) // np.uint32(w))  # ids < 2**31 (Workspace)
             c = node - r * w
-            gn = g[node]
+            # a neighbour's offset from the goal, as floats for ``octile_of_offsets``
+            to_gr = float(r - gr)
+            to_gc = float(c - gc)
+            gn = g[un]
             for j in range(n_succ):
-                k = successors[j] if canonical else j
-                dr = _DR[k]
-                dc = _DC[k]
+                k = successors[np.uint64(j)] if canonical else j
+                dr = _DR[np.uint64(k)]
+                dc = _DC[np.uint64(k)]
                 nb = node + dr * w + dc
-                s_nb = state[nb]
+                unb = np.uint64(nb)
+                s_nb = state[unb]
                 if s_nb == _BLOCKED:
                     continue
                 is_diagonal = k >= 4
                 step = diagonal if is_diagonal else straight
                 if not canonical and use_cost:  # one cost everywhere: in step_scale
-                    step *= 1.0 + cost_factor * padded_cost[nb]
+                    step *= 1.0 + cost_factor * padded_cost[unb]
                 ng = gn + step
-                if s_nb != 0 and ng >= g[nb]:
+                if s_nb != 0 and ng >= g[unb]:
                     continue  # most neighbours end here, so the corner test comes after
-                if is_diagonal and (state[node + dc] == _BLOCKED or state[node + dr * w] == _BLOCKED):
+                if is_diagonal and (
+                    state[np.uint64(node + dc)] == _BLOCKED or state[np.uint64(node + dr * w)] == _BLOCKED
+                ):
                     continue  # no cutting past a blocked corner
-                g[nb] = ng
+                g[unb] = ng
                 if nb == goal:
-                    state[nb] = _CLOSED | (k << 2)  # never expanded: its cost is all the search needs
+                    state[unb] = _CLOSED | (k << 2)  # never expanded: its cost is all the search needs
                     best = ng
                     continue
-                f = ng + heuristic_weight * octile_heuristic(r + dr, c + dc, gr, gc)
+                to_goal = octile_of_offsets(to_gr + _DRF[np.uint64(k)], to_gc + _DCF[np.uint64(k)])
+                f = ng + heuristic_weight * to_goal
                 if f >= best:
-                    state[nb] = _CLOSED | (k << 2)  # cannot lead to a cheaper goal path; g stays
+                    state[unb] = _CLOSED | (k << 2)  # cannot lead to a cheaper goal path; g stays
                     continue
                 nbk = int((f - f0) * inv)
                 if nbk < b:
                     nbk = b  # rounding: a consistent heuristic never lowers f
-                state[nb] = _OPEN | (k << 2)
-                slot = nbk & mask
-                top = counts[slot]
-                buckets[slot, top] = nb
-                counts[slot] = top + 1
+                state[unb] = _OPEN | (k << 2)
+                push = np.uint64(nbk & mask)
+                top = counts[push]
+                buckets[push, np.uint64(top)] = nb
+                counts[push] = top + 1
                 if top >= fullest:
                     fullest = top + 1
                 live += 1

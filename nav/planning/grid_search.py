@@ -128,6 +128,17 @@ def _octile(r: int, c: int, gr: int, gc: int) -> float:
     return dr + (SQRT2 - 1.0) * dc
 
 
+@njit(cache=True, nogil=True, inline="always")
+def octile_of_offsets(d_row: float, d_col: float) -> float:
+    """``_octile`` of a cell ``d_row, d_col`` cells (whole numbers, as floats) from the goal, bit
+    for bit (the same float operations on the same values), but branch-free: near the start-goal
+    diagonal which of the two is larger flips from cell to cell, and ``_octile``'s branch
+    mispredicts there (the bucket kernel's hot loop)."""
+    a = abs(d_row)
+    b = abs(d_col)
+    return max(a, b) + (SQRT2 - 1.0) * min(a, b)
+
+
 @njit(cache=True, nogil=True)
 def _run(
     state: np.ndarray,
