@@ -572,8 +572,8 @@ class Navigation:
         reason = {
             LETHAL_OBSTACLE: "inside an obstacle",
             INSCRIBED_INFLATED_OBSTACLE: "inside the inscribed radius of an obstacle",
-            NO_INFORMATION: "in unknown space (allow_unknown is off: in the 3D view click a \"goal in "
-            "unknown space\", or send allow_unknown: true with the goal, or set allow_unknown_goals)",
+            NO_INFORMATION: 'in unknown space (allow_unknown is off: in the 3D view click a "goal in '
+            'unknown space", or send allow_unknown: true with the goal, or set allow_unknown_goals)',
         }.get(cost)
         if cost == NO_INFORMATION and (
             self.options.allow_unknown_goals if allow_unknown is None else allow_unknown
