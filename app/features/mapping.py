@@ -39,13 +39,12 @@ import numpy as np
 from app.features.localization import Localization
 from app.features.recording import Recording
 from app.modes import Mode
-from nav.slam.system import GraphSlam
+from nav.slam.system import GraphSlam, SlamOptions
 from nav.types import LaserScan, OccupancyGrid, Pose2D
 
 if TYPE_CHECKING:
     from app.runtime import Runtime
     from app.session import Session
-    from nav.slam.system import GraphSlam, SlamOptions
     from robot.base import SensorFrame
 
 ORDER = 10
@@ -118,7 +117,9 @@ class Mapping:
     ) -> None:
         self.session = session
         self.options = options or MappingOptions()
-        self.slam_options = slam_options
+        # odometry is paired at each scan's stamp (odometry_history), so the prediction is the
+        # unbiased pose to choose the unobserved points at (SlamOptions, issue 18)
+        self.slam_options = slam_options or SlamOptions(unobserved_points_at_prediction=True)
         sync = self.options.synchronous
         self.synchronous = bool(getattr(session.clock, "is_virtual", False)) if sync is None else sync
         lid = session.profile.lidar
