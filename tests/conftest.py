@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -31,6 +32,24 @@ BROWSER_MARKS = [
     pytest.mark.skipif(not CHROMIUM.exists(), reason="needs /usr/bin/chromium"),
 ]
 """``pytestmark`` of every browser-test module."""
+
+
+@contextmanager
+def operator_page(browser, url: str, pose: dict, timeout_ms: int = 120_000) -> Iterator:
+    """A Live page whose operator takes control (from whoever held it) and sets the initial pose
+    ``{x, y[, theta]}``, as someone arriving at the dashboard would; the context closes after."""
+    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)
+    ctx.set_default_timeout(timeout_ms)
+    page = ctx.new_page()
+    try:
+        page.goto(url + "/")
+        take = page.request.post(url + "/api/control/acquire", data={"take_over": True})
+        assert take.ok, take.text()
+        r = page.request.post(url + "/api/localization/initial_pose", data=pose)
+        assert r.ok, r.text()
+        yield page
+    finally:
+        ctx.close()
 
 
 def make_settings(tmp_path: Path, **overrides):

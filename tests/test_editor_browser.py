@@ -10,7 +10,7 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
-from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
+from conftest import ARTIFACTS, BROWSER_MARKS, make_settings, operator_page
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
@@ -131,29 +131,20 @@ def test_go_to_a_place_from_the_live_page(browser, server: EmbeddedServer) -> No
         ).status_code
         == 200
     )
-    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)
-    ctx.set_default_timeout(LONG)
-    page = ctx.new_page()
+    # the page's operator takes control (the test's API client held it) and localizes
     try:
-        page.goto(server.url + "/")
-        # the page's operator takes control (the test's API client held it) and localizes
-        take = page.request.post(server.url + "/api/control/acquire", data={"take_over": True})
-        assert take.ok, take.text()
-        r = page.request.post(
-            server.url + "/api/localization/initial_pose",
-            data={"x": here["x"], "y": here["y"], "theta": here["theta"]},
-        )
-        assert r.ok, r.text()
-        page.wait_for_selector("#place-select option[value='sofa']", state="attached")
-        page.select_option("#place-select", "sofa")
-        page.get_by_role("button", name="Go to the chosen place").click()
-        deadline = time.monotonic() + 20
-        goals = []
-        while not goals and time.monotonic() < deadline:
-            page.wait_for_timeout(100)
-            goals = api.get("/api/navigation").json()["goals"]
-        assert goals and goals[0]["x"] == 1.5 and goals[0]["y"] == 3.5
+        with operator_page(
+            browser, server.url, {"x": here["x"], "y": here["y"], "theta": here["theta"]}, LONG
+        ) as page:
+            page.wait_for_selector("#place-select option[value='sofa']", state="attached")
+            page.select_option("#place-select", "sofa")
+            page.get_by_role("button", name="Go to the chosen place").click()
+            deadline = time.monotonic() + 20
+            goals = []
+            while not goals and time.monotonic() < deadline:
+                page.wait_for_timeout(100)
+                goals = api.get("/api/navigation").json()["goals"]
+            assert goals and goals[0]["x"] == 1.5 and goals[0]["y"] == 3.5
     finally:
         api.post("/api/navigation/cancel")
-        ctx.close()
         api.close()

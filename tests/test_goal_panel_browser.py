@@ -8,7 +8,7 @@ from collections.abc import Iterator
 
 import httpx
 import pytest
-from conftest import ARTIFACTS, BROWSER_MARKS, make_settings
+from conftest import ARTIFACTS, BROWSER_MARKS, make_settings, operator_page
 
 from app.embedded import EmbeddedServer, serve_in_thread
 
@@ -24,52 +24,38 @@ def server(tmp_path_factory: pytest.TempPathFactory) -> Iterator[EmbeddedServer]
 
 def test_patrol_legs_and_outcomes_in_the_goal_panel(browser, server: EmbeddedServer) -> None:
     api = httpx.Client(base_url=server.url, timeout=10.0)
-    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)
-    ctx.set_default_timeout(LONG)
-    page = ctx.new_page()
     try:
-        page.goto(server.url + "/")
-        take = page.request.post(server.url + "/api/control/acquire", data={"take_over": True})
-        assert take.ok, take.text()
-        r = page.request.post(server.url + "/api/localization/initial_pose", data={"x": 3.0, "y": 3.5})
-        assert r.ok, r.text()
-        for x, y in ((2.4, 3.5), (3.0, 3.0)):  # two near, free spots of the apartment's living room
-            page.fill("#goal-form input[name=x]", str(x))
-            page.fill("#goal-form input[name=y]", str(y))
-            page.get_by_role("button", name="Add waypoint to the list").click()
-        page.check("#route-patrol")
-        page.get_by_role("button", name="Navigate through the waypoints").click()
-        # a patrol starts with two laps queued: four legs, the first active
-        page.wait_for_function("document.querySelectorAll('#mission-legs li').length >= 4")
-        page.wait_for_selector("#mission-legs li.leg-reached")  # a leg reached, shown as such
-        mission = api.get("/api/missions?limit=1").json()["items"][0]
-        assert mission["state"] == "active"
-        r = page.request.post(server.url + f"/api/missions/{mission['id']}/cancel")
-        assert r.ok, r.text()
-        page.wait_for_selector("#mission-legs li.leg-canceled")
-        assert "canceled" in (page.text_content("#mission-head") or "")
-        text = page.text_content("#mission-legs") or ""
-        assert "reached" in text and "operator_cancel" in text
-        ARTIFACTS.mkdir(exist_ok=True)  # docs/editor.md's picture of the panel
-        page.locator("section[aria-labelledby=goals-h]").screenshot(path=str(ARTIFACTS / "goal-panel.png"))
+        with operator_page(browser, server.url, {"x": 3.0, "y": 3.5}, LONG) as page:
+            for x, y in ((2.4, 3.5), (3.0, 3.0)):  # two near, free spots of the apartment's living room
+                page.fill("#goal-form input[name=x]", str(x))
+                page.fill("#goal-form input[name=y]", str(y))
+                page.get_by_role("button", name="Add waypoint to the list").click()
+            page.check("#route-patrol")
+            page.get_by_role("button", name="Navigate through the waypoints").click()
+            # a patrol starts with two laps queued: four legs, the first active
+            page.wait_for_function("document.querySelectorAll('#mission-legs li').length >= 4")
+            page.wait_for_selector("#mission-legs li.leg-reached")  # a leg reached, shown as such
+            mission = api.get("/api/missions?limit=1").json()["items"][0]
+            assert mission["state"] == "active"
+            r = page.request.post(server.url + f"/api/missions/{mission['id']}/cancel")
+            assert r.ok, r.text()
+            page.wait_for_selector("#mission-legs li.leg-canceled")
+            assert "canceled" in (page.text_content("#mission-head") or "")
+            text = page.text_content("#mission-legs") or ""
+            assert "reached" in text and "operator_cancel" in text
+            ARTIFACTS.mkdir(exist_ok=True)  # docs/editor.md's picture of the panel
+            page.locator("section[aria-labelledby=goals-h]").screenshot(
+                path=str(ARTIFACTS / "goal-panel.png")
+            )
     finally:
         api.post("/api/navigation/cancel")
-        ctx.close()
         api.close()
 
 
 def test_unknown_space_box_sends_the_waypoints_with_allow_unknown(browser, server: EmbeddedServer) -> None:
     """Navigating while mapping from the panel: ticked, the waypoints go with Nav2's allow_unknown;
     unticked, without it (the server then refuses a waypoint in unknown space)."""
-    ctx = browser.new_context(viewport={"width": 1280, "height": 900}, bypass_csp=True)
-    ctx.set_default_timeout(LONG)
-    page = ctx.new_page()
-    try:
-        page.goto(server.url + "/")
-        take = page.request.post(server.url + "/api/control/acquire", data={"take_over": True})
-        assert take.ok, take.text()
-        r = page.request.post(server.url + "/api/localization/initial_pose", data={"x": 3.0, "y": 3.5})
-        assert r.ok, r.text()
+    with operator_page(browser, server.url, {"x": 3.0, "y": 3.5}, LONG) as page:
         sent = []
         for ticked in (False, True):
             page.set_checked("#goals-unknown", ticked)
@@ -84,5 +70,3 @@ def test_unknown_space_box_sends_the_waypoints_with_allow_unknown(browser, serve
             page.request.post(server.url + "/api/navigation/cancel")
         assert "allow_unknown" not in sent[0]
         assert sent[1]["allow_unknown"] is True and (sent[1]["x"], sent[1]["y"]) == (2.4, 3.5)
-    finally:
-        ctx.close()
