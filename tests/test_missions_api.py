@@ -212,8 +212,7 @@ def rt(tmp_path: Path):
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
         # what Runtime.start does, without the wall-clock thread
-        for mod in (localization, navigation, missions, recording):
-            rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+        rt.setup_features((localization, navigation, missions, recording))
         rt.on_pose_input("initial_pose", Pose2D(3.0, 3.5, 0.0))
         yield rt
     finally:

@@ -134,8 +134,7 @@ def test_viewer_clicks_set_initial_pose_and_queue_goals(tmp_path: Path) -> None:
 
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
-        for mod in (localization, navigation):  # what Runtime.start does, without the wall-clock thread
-            rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+        rt.setup_features((localization, navigation))
         rt.on_pose_input("goal", Pose2D(3.0, 1.2, 0.0))
         assert any(e["type"] == "refused" and "not localized" in e["reason"] for e in rt.session.events)
         rt.on_pose_input("initial_pose", Pose2D(3.0, 3.5, 0.0))

@@ -26,8 +26,7 @@ WINDOW = Pose2D(2.2, 1.8, -1.57)
 def test_a_patrol_loops_until_cancelled(tmp_path: Path) -> None:
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
-        for mod in (localization, navigation, missions, zones):
-            rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+        rt.setup_features((localization, navigation, missions, zones))
         rt.on_pose_input("initial_pose", Pose2D(3.0, 3.5, 0.0))
         ms = rt.features["missions"]
         m = ms.create([SOFA, WINDOW], patrol=True)

@@ -74,8 +74,7 @@ def test_a_route_of_three_places_run_twice(tmp_path: Path) -> None:
     """Virtual clock: each of the six legs is reached, in order, and recorded as its own outcome."""
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
-        for mod in (localization, navigation, missions, zones):
-            rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+        rt.setup_features((localization, navigation, missions, zones))
         rt.on_pose_input("initial_pose", Pose2D(3.0, 3.5, 0.0))
         store = PlaceStore(rt.engine)
         map_id = rt.features["localization"].map_id

@@ -85,8 +85,7 @@ def test_view_click_sets_a_goal_in_unknown_space_while_mapping(tmp_path: Path) -
     seen is refused; the "goal in unknown space" click (Nav2's allow_unknown goal) is accepted."""
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
     try:
-        for mod in (localization, mapping, navigation):  # Runtime.start's wiring, no wall-clock thread
-            rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+        rt.setup_features((localization, mapping, navigation))
         nav = rt.feature(navigation.Navigation)
         rt.feature(mapping.Mapping).start()
         while not nav.mapping_live():

@@ -27,8 +27,7 @@ KEEPOUT = [[2.0, 2.9], [2.4, 2.9], [2.4, 4.95], [2.0, 4.95]]
 
 def runtime(tmp_path: Path):
     rt = Runtime.build(make_settings(tmp_path), clock=VirtualClock())
-    for mod in (localization, navigation, zones):  # what Runtime.start does, without the wall-clock thread
-        rt.features[mod.__name__.rsplit(".", 1)[-1]] = mod.setup(rt)
+    rt.setup_features((localization, navigation, zones))
     return rt
 
 
