@@ -598,14 +598,20 @@ class GraphSlam:
                 # per candidate, which would favour poses that put them onto mapped cells) and the
                 # scan matched again from the same prediction. Chosen at the prediction, which is
                 # unbiased, unless the first match lands away from it (slip, lagging odometry: the
-                # right points would be chosen out), then at that match.
-                first, score = self._search(target, match_pts, prior, window)
-                at_prior = o.unobserved_points_at_prediction or _close(first, prior, o.resolution)
-                ref = prior if at_prior else first
+                # right points would be chosen out), then at that match. Chosen at the prediction
+                # always (``unobserved_points_at_prediction``), no first match is needed unless
+                # every point (or fewer than 3) is kept.
+                first: tuple[Pose2D, float] | None = None
+                ref = prior
+                if not o.unobserved_points_at_prediction:
+                    first = self._search(target, match_pts, prior, window)
+                    ref = prior if _close(first[0], prior, o.resolution) else first[0]
                 keep = target.observed(ref.transform_points(match_pts))
                 if 3 <= np.count_nonzero(keep) < len(keep):
-                    first, score = self._search(target, match_pts[keep], prior, window)
-                in_submap, self.last_score = first, score
+                    first = self._search(target, match_pts[keep], prior, window)
+                elif first is None:
+                    first = self._search(target, match_pts, prior, window)
+                in_submap, self.last_score = first
         except ScanMatchError:
             return pred, match_pts
         return target.local_pose.compose(in_submap), match_pts
