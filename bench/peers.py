@@ -57,6 +57,7 @@ from nav.control import DwaController, DwaOptions, NoValidControl
 from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
 from nav.planning.kernel import octile_search
+from nav.slam.coverage import observed_by_scan
 from nav.slam.field import LikelihoodField
 from nav.slam.matcher import RefineOptions, match_scan_with_fallback
 from nav.slam.metric import parse_relations, relative_poses
@@ -254,8 +255,14 @@ class NavdeckScanMatcher:
             translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
         )
 
-    def match(self, reference: np.ndarray, current: np.ndarray, prior: Pose2D) -> Pose2D:
+    def match(self, scan: LaserScan, reference: np.ndarray, current: np.ndarray, prior: Pose2D) -> Pose2D:
+        """``current``'s pose in the frame of ``scan`` (whose returns are ``reference``)."""
         field = LikelihoodField.from_points(reference, self.resolution, self.sigma)
+        # as the front end leaves out points its submap has not observed, chosen at the prediction
+        # (the live mapping stage's unobserved_points_at_prediction), within one cell of a return
+        keep = observed_by_scan(scan, MATCH_RANGE, prior.transform_points(current), self.resolution)
+        if 3 <= np.count_nonzero(keep) < len(keep):
+            current = current[keep]
         pose, _ = match_scan_with_fallback(
             field, current, prior, self.window, self.wide, self.minimum_score, self.refine
         )
@@ -339,11 +346,11 @@ def _match_row(
     theirs: KartoScanMatcher | None,
 ) -> Row:
     """Per-match median time of both sides over ``pairs``; with ``truth``, their accuracy."""
-    pts = [(_scan_points(a), _scan_points(b), prior) for a, b, prior in pairs]
+    pts = [(a, _scan_points(a), _scan_points(b), prior) for a, b, prior in pairs]
     estimates: dict[str, list[Pose2D]] = {}
 
     def run_ours() -> None:
-        estimates["navdeck"] = [ours.match(ref, cur, prior) for ref, cur, prior in pts]
+        estimates["navdeck"] = [ours.match(scan, ref, cur, prior) for scan, ref, cur, prior in pts]
 
     if theirs is not None:
         kscans = [(theirs.scan(a, Pose2D(), 0), theirs.scan(b, prior, 1)) for a, b, prior in pairs]

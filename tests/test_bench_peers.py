@@ -100,7 +100,7 @@ def test_both_scan_matchers_recover_a_known_motion(side: str) -> None:
     truth = b.relative_to(a)
     prior = Pose2D(truth.x + 0.04, truth.y - 0.03, truth.theta + math.radians(1.5))
     if side == "navdeck":
-        got = NavdeckScanMatcher().match(_scan_points(ref), _scan_points(cur), prior)
+        got = NavdeckScanMatcher().match(ref, _scan_points(ref), _scan_points(cur), prior)
     else:
         karto = pytest.importorskip("karto_scanmatcher")
         m = KartoScanMatcher(karto, ref)

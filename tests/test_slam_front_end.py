@@ -184,10 +184,12 @@ def test_unobserved_points_can_be_chosen_at_the_prediction_only() -> None:
     # (office corridors 0.2-0.5 % short). With unobserved_points_at_prediction (the live mapping
     # stage, whose odometry is paired at the scan's stamp) they are chosen at the prediction.
     # A prediction 0.08 m behind puts the first match more than a cell away:
+    # Chosen there, no first match with all points is needed: one search, the observed points only.
     searched, prior, slam = _searched_point_sets(SlamOptions(unobserved_points_at_prediction=True), 0.08)
     sm = slam._submaps[0]
-    assert len(searched) == 2
-    assert sm.observed(prior.transform_points(searched[1])).all()
+    assert len(searched) == 1
+    assert sm.observed(prior.transform_points(searched[0])).all()
+    assert not sm.observed(prior.transform_points(_searched_point_sets(SlamOptions(), 0.08)[0][0])).all()
     # the default chooses them at that first match (FR079's lagging odometry), so its point set
     # holds points unobserved at the prediction
     searched, prior, slam = _searched_point_sets(SlamOptions(), 0.08)

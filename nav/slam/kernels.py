@@ -742,3 +742,30 @@ def place_submap(
             val[r, c] = v
             ok[r, c] = o
     return val, ok
+
+
+@njit(cache=True, nogil=True)
+def observed_by_scan(
+    ranges: np.ndarray, angle_min: float, angle_increment: float, points: np.ndarray, margin: float
+) -> np.ndarray:
+    """(N,) bool: each of the (N, 2) points (in the scan's frame) lies within the range its beam or
+    a neighbouring beam measured, plus ``margin`` (``coverage.observed_by_scan``; the same float64
+    operations as ``coverage.observed_by_scan_reference``)."""
+    n = ranges.shape[0]
+    full_circle = n * angle_increment >= 2.0 * math.pi - 0.5 * angle_increment
+    out = np.zeros(points.shape[0], dtype=np.bool_)
+    for i in range(points.shape[0]):
+        x, y = points[i, 0], points[i, 1]
+        k = np.rint(((math.atan2(y, x) - angle_min) % (2.0 * math.pi)) / angle_increment)
+        if k > n - 1:
+            if not full_circle:
+                continue  # behind a scan that does not go all round
+            k = 0.0  # the last half-beam of a full circle is the first beam's
+        j = int(k)
+        reach = ranges[j]
+        if j > 0:
+            reach = max(reach, ranges[j - 1])
+        if j < n - 1:
+            reach = max(reach, ranges[j + 1])
+        out[i] = math.hypot(x, y) <= reach + margin
+    return out
