@@ -260,7 +260,7 @@ class NavdeckScanMatcher:
         field = LikelihoodField.from_points(reference, self.resolution, self.sigma)
         # as the front end leaves out points its submap has not observed, chosen at the prediction
         # (the live mapping stage's unobserved_points_at_prediction), within one cell of a return
-        keep = observed_by_scan(scan, MATCH_RANGE, prior.transform_points(current), self.resolution)
+        keep = observed_by_scan(scan, MATCH_RANGE, current, self.resolution, prior)
         if 3 <= np.count_nonzero(keep) < len(keep):
             current = current[keep]
         pose, _ = match_scan_with_fallback(

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nav.slam.coverage import observed_by_scan, observed_by_scan_reference
-from nav.types import LaserScan
+from nav.types import LaserScan, Pose2D
 
 
 def _scan(ranges: list[float], angle_min: float, increment: float) -> LaserScan:
@@ -58,6 +58,13 @@ def test_compiled_equals_the_numpy_reference(seed: int, full: bool) -> None:
     ranges[rng.random(n) < 0.05] = np.nan
     scan = _scan(list(ranges), rng.uniform(-math.pi, 0.0), inc)
     pts = rng.uniform(-10.0, 10.0, (2000, 2))
-    got = observed_by_scan(scan, 8.0, pts, 0.05)
-    assert 0 < got.sum() < len(pts)
-    assert np.array_equal(got, observed_by_scan_reference(scan, 8.0, pts, 0.05))
+    pose = Pose2D(*rng.uniform(-1.0, 1.0, 3))
+    for at in (Pose2D(), pose):
+        got = observed_by_scan(scan, 8.0, pts, 0.05, at)
+        assert 0 < got.sum() < len(pts)
+        assert np.array_equal(got, observed_by_scan_reference(scan, 8.0, pts, 0.05, at))
+    # the pose takes the points into the scan's frame
+    assert np.array_equal(
+        observed_by_scan(scan, 8.0, pts, 0.05, pose),
+        observed_by_scan(scan, 8.0, pose.transform_points(pts), 0.05),
+    )

@@ -746,26 +746,47 @@ def place_submap(
 
 @njit(cache=True, nogil=True)
 def observed_by_scan(
-    ranges: np.ndarray, angle_min: float, angle_increment: float, points: np.ndarray, margin: float
+    ranges: np.ndarray,
+    range_min: float,
+    range_limit: float,
+    angle_min: float,
+    angle_increment: float,
+    points: np.ndarray,
+    pose: np.ndarray,
+    margin: float,
 ) -> np.ndarray:
-    """(N,) bool: each of the (N, 2) points (in the scan's frame) lies within the range its beam or
-    a neighbouring beam measured, plus ``margin`` (``coverage.observed_by_scan``; the same float64
-    operations as ``coverage.observed_by_scan_reference``)."""
+    """(N,) bool: each of the (N, 2) points, moved by ``pose`` (x, y, cos, sin) into the scan's
+    frame, lies within the range its beam or a neighbouring beam returned, plus ``margin``
+    (``coverage.observed_by_scan``; the same float64 operations as
+    ``coverage.observed_by_scan_reference``). A beam without a valid return (not finite, below
+    ``range_min``, beyond ``range_limit``) reaches nothing."""
     n = ranges.shape[0]
+    reach = np.empty(n)
+    for j in range(n):
+        r = ranges[j]
+        reach[j] = r if (r >= range_min and r <= range_limit) else 0.0  # False for nan and inf
     full_circle = n * angle_increment >= 2.0 * math.pi - 0.5 * angle_increment
+    x0, y0, c, s = pose[0], pose[1], pose[2], pose[3]
     out = np.zeros(points.shape[0], dtype=np.bool_)
     for i in range(points.shape[0]):
-        x, y = points[i, 0], points[i, 1]
-        k = np.rint(((math.atan2(y, x) - angle_min) % (2.0 * math.pi)) / angle_increment)
+        x = c * points[i, 0] - s * points[i, 1] + x0
+        y = s * points[i, 0] + c * points[i, 1] + y0
+        bearing = math.atan2(y, x) - angle_min
+        if bearing < 0.0:  # bearings from angle_min round the circle
+            bearing += 2.0 * math.pi
+        elif bearing >= 2.0 * math.pi:
+            bearing -= 2.0 * math.pi
+        k = math.floor(bearing / angle_increment + 0.5)
         if k > n - 1:
             if not full_circle:
                 continue  # behind a scan that does not go all round
-            k = 0.0  # the last half-beam of a full circle is the first beam's
+            k = 0  # the last half-beam of a full circle is the first beam's
         j = int(k)
-        reach = ranges[j]
+        far = reach[j]
         if j > 0:
-            reach = max(reach, ranges[j - 1])
+            far = max(far, reach[j - 1])
         if j < n - 1:
-            reach = max(reach, ranges[j + 1])
-        out[i] = math.hypot(x, y) <= reach + margin
+            far = max(far, reach[j + 1])
+        reach_m = far + margin
+        out[i] = x * x + y * y <= reach_m * reach_m
     return out
