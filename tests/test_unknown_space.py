@@ -104,6 +104,18 @@ def test_view_click_sets_a_goal_in_unknown_space_while_mapping(tmp_path: Path) -
         (queued,) = nav.state()["goals"]
         assert (queued["x"], queued["y"]) == pytest.approx((goal.x, goal.y), abs=1e-3)
         assert rt.session.modes.mode == Mode.MAPPING  # navigating while mapping stays one session
+
+        # a plain goal clicked after it, in seen free space, extends the request: the goal in
+        # unknown space accepted before is not checked again (it would be refused as a plain one)
+        free = (cm.costs == FREE_SPACE) & (ndimage.distance_transform_edt(cm.costs != LETHAL_OBSTACLE) > 10)
+        fr, fc = np.argwhere(free)[0]
+        fx, fy = cm.geometry.cell_to_world(np.array([fr]), np.array([fc]))[0]
+        assert rt.on_pose_input("goal", Pose2D(float(fx), float(fy), 0.0)) is None
+        rt.session.run_for(0.2)
+        assert [c for g in nav.state()["goals"] for c in (g["x"], g["y"])] == pytest.approx(
+            [goal.x, goal.y, fx, fy], abs=1e-3
+        )
+        assert "unknown space" in (rt.on_pose_input("goal", goal) or "")  # the new goal still is
     finally:
         rt.close()
 

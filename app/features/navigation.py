@@ -631,8 +631,11 @@ class Navigation:
             why = self.session.modes.unavailable().get(Mode.NAVIGATING.value) or self._guard()
         if why:
             raise NavigationRefused(why, mode.value, self.session.modes.allowed())
-        for i, g in enumerate(goals):
-            self.check_goal(g, i, allow_unknown)
+        # an extension checks only the goal it adds: the earlier ones were accepted with their own
+        # allow_unknown (a plain click after a "goal in unknown space" one must not refuse that one)
+        first = len(goals) - 1 if extends is not None else 0
+        for i in range(first, len(goals)):
+            self.check_goal(goals[i], i, allow_unknown)
         if not in_mapping:
             try:  # mode first: the loop never sees goals without the mode that drives them
                 self.session.modes.request(Mode.NAVIGATING, "navigation goal")
@@ -660,8 +663,9 @@ class Navigation:
 
     def add_goal(self, goal: Pose2D, allow_unknown: bool | None = None) -> None:
         """Queue ``goal`` after the current ones (a click in the 3D view); starts navigating if idle.
-        Extends the current request (same id, its earlier goals are not announced again).
-        ``allow_unknown`` as in ``set_goals`` (the view's "goal in unknown space" click)."""
+        Extends the current request (same id, its earlier goals are not announced or checked
+        again). ``allow_unknown`` as in ``set_goals`` (the view's "goal in unknown space" click),
+        for this goal only."""
         with self._lock:
             requests = [arg for kind, arg in self._pending if kind == "goals"]
         if requests:  # not picked up by the loop yet: extend the latest one
