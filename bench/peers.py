@@ -24,7 +24,9 @@ apart: the two 180 deg scans still overlap). The current scan is matched against
 scan alone, from the odometry prior. Both sides use the same 0.05 m grid and the same range limit
 (``MATCH_RANGE``, navdeck's ``max_laser_range`` and slam_toolbox's default); each side builds its
 own grid from the reference scan inside the timed call. navdeck: ``LikelihoodField.from_points`` of
-the reference's returns then ``match_scan_with_fallback`` with the SLAM front end's windows
+the reference's returns, the current scan's points the reference did not observe left out (chosen
+at the prior, ``nav.slam.coverage.observed_by_scan``, as the live front end leaves out points its
+submap has not observed), then ``match_scan_with_fallback`` with the SLAM front end's windows
 (+-0.1 m / +-10 deg at 0.5 deg; below score 0.6 again in +-0.5 m / +-30 deg); karto-scanmatcher
 (OpenKarto's ScanMatcher): its defaults (+-0.15 m, +-20 deg coarse at 2 deg, fine at 0.2 deg,
 smear 0.03 m, distance / angle penalties) at resolution 0.05, ``match_scan(scan, [reference],

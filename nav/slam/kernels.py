@@ -263,20 +263,56 @@ def gauss_newton(
     """Gauss-Newton on ``sum (1 - F(T p_i))^2 occupied_weight / N`` plus translation / rotation
     priors towards ``prior``; the 3 x 3 normal equations are accumulated point by point (same
     cost function, Jacobian and damping as ``matcher.refine_pose_reference``). Returns the pose
-    (x, y, theta wrapped) and the mean field value at it."""
+    (x, y, theta wrapped) and the mean field value at it.
+
+    Each step is :func:`_bilinear` at every point, split into passes so that its four divisions
+    per point run as vector divisions (the cell coordinates, then the gradients): the same IEEE
+    operations on the same values as one call per point, so the same bits, ~25 % faster."""
     n = pts.shape[0]
+    gh, gw = g.shape
     x = x0.copy()
     wo2 = occupied_weight / n  # wo^2
     h = np.empty((3, 3))
     b = np.empty(3)
+    px = np.ascontiguousarray(pts[:, 0])
+    py = np.ascontiguousarray(pts[:, 1])
+    cx = np.empty(n)
+    cy = np.empty(n)
+    dfx = np.empty(n)  # the field's gradient, in cells then in metres
+    dfy = np.empty(n)
+    f = np.empty(n)
     for _ in range(max_iterations):
         c, s = math.cos(x[2]), math.sin(x[2])
+        for i in range(n):  # the points' cell coordinates (vectorized)
+            cx[i] = (c * px[i] - s * py[i] + x[0] - ox) / res - 0.5
+            cy[i] = (s * px[i] + c * py[i] + x[1] - oy) / res - 0.5
+        for i in range(n):  # bilinear lookups, as _bilinear: 0 outside
+            x0c = math.floor(cx[i])
+            y0c = math.floor(cy[i])
+            if x0c < 0 or x0c >= gw - 1 or y0c < 0 or y0c >= gh - 1:
+                f[i] = dfx[i] = dfy[i] = 0.0
+                continue
+            fx = cx[i] - x0c
+            fy = cy[i] - y0c
+            xi = int(x0c)
+            yi = int(y0c)
+            v00 = g[yi, xi]
+            v01 = g[yi, xi + 1]
+            v10 = g[yi + 1, xi]
+            v11 = g[yi + 1, xi + 1]
+            top = v00 + fx * (v01 - v00)
+            bot = v10 + fx * (v11 - v10)
+            dfx[i] = (1 - fy) * (v01 - v00) + fy * (v11 - v10)
+            dfy[i] = bot - top
+            f[i] = top + fy * (bot - top)
+        for i in range(n):  # per metre (vectorized; 0 / res is 0 outside)
+            dfx[i] = dfx[i] / res
+            dfy[i] = dfy[i] / res
         h[:] = 0.0
         b[:] = 0.0
         for i in range(n):
-            px, py = pts[i, 0], pts[i, 1]
-            f, gx, gy = _bilinear(g, ox, oy, res, c * px - s * py + x[0], s * px + c * py + x[1])
-            jt = gx * (-s * px - c * py) + gy * (c * px - s * py)
+            gx, gy = dfx[i], dfy[i]
+            jt = gx * (-s * px[i] - c * py[i]) + gy * (c * px[i] - s * py[i])
             # J row = -wo (gx, gy, jt), residual wo (1 - f): J^T J and J^T r scale by wo^2
             h[0, 0] += gx * gx
             h[0, 1] += gx * gy
@@ -284,7 +320,7 @@ def gauss_newton(
             h[1, 1] += gy * gy
             h[1, 2] += gy * jt
             h[2, 2] += jt * jt
-            e = 1.0 - f
+            e = 1.0 - f[i]
             b[0] -= gx * e
             b[1] -= gy * e
             b[2] -= jt * e
@@ -307,8 +343,7 @@ def gauss_newton(
     c, s = math.cos(x[2]), math.sin(x[2])
     acc = 0.0
     for i in range(n):
-        px, py = pts[i, 0], pts[i, 1]
-        acc += _bilinear(g, ox, oy, res, c * px - s * py + x[0], s * px + c * py + x[1])[0]
+        acc += _bilinear(g, ox, oy, res, c * px[i] - s * py[i] + x[0], s * px[i] + c * py[i] + x[1])[0]
     return x, acc / n
 
 
@@ -448,6 +483,28 @@ def exhaustive_search(
 
 
 @njit(cache=True, nogil=True)
+def exhaustive_search_of_points(
+    grid: np.ndarray,
+    bound: np.ndarray,
+    pts: np.ndarray,
+    cos_t: np.ndarray,
+    sin_t: np.ndarray,
+    px: float,
+    py: float,
+    ox: float,
+    oy: float,
+    res: float,
+    wc: int,
+) -> tuple[int, int, int, float]:
+    """:func:`rotated_cells` then :func:`exhaustive_search` (angle-bounded, no runner-up) in one
+    call: the SLAM front end's narrow search runs once per scan, and the two calls' Python-side
+    dispatch and the (A, N) cell arrays handed back and forth were ~15 % of it."""
+    rows0, cols0 = rotated_cells(pts, cos_t, sin_t, px, py, ox, oy, res)
+    a, dy, dx, best, _ = exhaustive_search(grid, bound, rows0, cols0, wc, res, math.inf)
+    return a, dy, dx, best
+
+
+@njit(cache=True, nogil=True)
 def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
     """``out[r, c] = max(prev[r, c], prev[r + s, c], prev[r, c + s], prev[r + s, c + s])`` (zero
     outside): the next max-pooled level, each cell the max over a block twice as wide. Separable
@@ -511,13 +568,18 @@ def rotated_cells(
     na, n = cos_t.shape[0], pts.shape[0]
     rows = np.empty((na, n), dtype=np.int64)
     cols = np.empty((na, n), dtype=np.int64)
+    xs = np.ascontiguousarray(pts[:, 0])
+    ys = np.ascontiguousarray(pts[:, 1])
+    qx = np.empty(n)
+    qy = np.empty(n)
     for a in range(na):
         c, s = cos_t[a], sin_t[a]
+        for i in range(n):  # vectorized divisions (same IEEE operations, same bits)
+            qx[i] = (c * xs[i] - s * ys[i] + px - ox) / res
+            qy[i] = (s * xs[i] + c * ys[i] + py - oy) / res
         for i in range(n):
-            x = c * pts[i, 0] - s * pts[i, 1] + px
-            y = s * pts[i, 0] + c * pts[i, 1] + py
-            cols[a, i] = math.floor((x - ox) / res)
-            rows[a, i] = math.floor((y - oy) / res)
+            cols[a, i] = math.floor(qx[i])
+            rows[a, i] = math.floor(qy[i])
     return rows, cols
 
 

@@ -151,6 +151,21 @@ def _correlative(
     na = math.ceil(window.angular_search_window / window.angular_step)
     thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
     wc = math.ceil(window.linear_search_window / res)
+    if compiled and window.levels == 0 and separation == math.inf:  # the front end's search
+        a, dy, dx, best = kernels.exhaustive_search_of_points(
+            field.field,
+            field.window_max(wc),
+            np.ascontiguousarray(pts, dtype=np.float64),
+            np.cos(thetas),
+            np.sin(thetas),
+            prior.x,
+            prior.y,
+            float(field.origin[0]),
+            float(field.origin[1]),
+            res,
+            wc,
+        )
+        return Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a]))), best, 0.0
     if compiled:  # (A, N) cells of the points at each angle and zero offset
         rows0, cols0 = kernels.rotated_cells(
             np.ascontiguousarray(pts, dtype=np.float64),
@@ -166,11 +181,9 @@ def _correlative(
         rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2)
         cell = np.floor((rot - field.origin) / res).astype(np.int64)
         rows0, cols0 = cell[..., 1], cell[..., 0]
-    if compiled and window.levels == 0:  # the front end's search: one compiled pass
-        # the angle bounds are used only without a runner-up (which needs every score)
-        bound = field.window_max(wc) if separation == math.inf else _NO_BOUND
+    if compiled and window.levels == 0:  # with a runner-up, which needs every score: no bounds
         a, dy, dx, best, runner_up = kernels.exhaustive_search(
-            field.field, bound, rows0, cols0, wc, res, separation
+            field.field, _NO_BOUND, rows0, cols0, wc, res, separation
         )
         pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
         return pose, float(best), float(runner_up)
