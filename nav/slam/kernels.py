@@ -214,13 +214,10 @@ def _block_sums(
 
 
 @njit(cache=True, nogil=True, inline="always")
-def _bilinear(
-    g: np.ndarray, ox: float, oy: float, res: float, x: float, y: float
-) -> tuple[float, float, float]:
-    """Bilinear value and world-frame gradient of ``g`` (cell centres are samples); 0 outside."""
+def _bilinear_cell(g: np.ndarray, cx: float, cy: float) -> tuple[float, float, float]:
+    """Bilinear value of ``g`` at cell coordinates (cx, cy) (cell centres at integers) and its
+    gradient per cell; 0 outside."""
     h, w = g.shape
-    cx = (x - ox) / res - 0.5
-    cy = (y - oy) / res - 0.5
     x0 = math.floor(cx)
     y0 = math.floor(cy)
     if x0 < 0 or x0 >= w - 1 or y0 < 0 or y0 >= h - 1:
@@ -235,9 +232,16 @@ def _bilinear(
     v11 = g[yi + 1, xi + 1]
     top = v00 + fx * (v01 - v00)
     bot = v10 + fx * (v11 - v10)
-    gx = ((1 - fy) * (v01 - v00) + fy * (v11 - v10)) / res
-    gy = (bot - top) / res
-    return top + fy * (bot - top), gx, gy
+    return top + fy * (bot - top), (1 - fy) * (v01 - v00) + fy * (v11 - v10), bot - top
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _bilinear(
+    g: np.ndarray, ox: float, oy: float, res: float, x: float, y: float
+) -> tuple[float, float, float]:
+    """Bilinear value and world-frame gradient of ``g`` (cell centres are samples); 0 outside."""
+    f, dx, dy = _bilinear_cell(g, (x - ox) / res - 0.5, (y - oy) / res - 0.5)
+    return f, dx / res, dy / res
 
 
 @njit(cache=True, nogil=True)
@@ -269,7 +273,6 @@ def gauss_newton(
     per point run as vector divisions (the cell coordinates, then the gradients): the same IEEE
     operations on the same values as one call per point, so the same bits, ~25 % faster."""
     n = pts.shape[0]
-    gh, gw = g.shape
     x = x0.copy()
     wo2 = occupied_weight / n  # wo^2
     h = np.empty((3, 3))
@@ -286,25 +289,8 @@ def gauss_newton(
         for i in range(n):  # the points' cell coordinates (vectorized)
             cx[i] = (c * px[i] - s * py[i] + x[0] - ox) / res - 0.5
             cy[i] = (s * px[i] + c * py[i] + x[1] - oy) / res - 0.5
-        for i in range(n):  # bilinear lookups, as _bilinear: 0 outside
-            x0c = math.floor(cx[i])
-            y0c = math.floor(cy[i])
-            if x0c < 0 or x0c >= gw - 1 or y0c < 0 or y0c >= gh - 1:
-                f[i] = dfx[i] = dfy[i] = 0.0
-                continue
-            fx = cx[i] - x0c
-            fy = cy[i] - y0c
-            xi = int(x0c)
-            yi = int(y0c)
-            v00 = g[yi, xi]
-            v01 = g[yi, xi + 1]
-            v10 = g[yi + 1, xi]
-            v11 = g[yi + 1, xi + 1]
-            top = v00 + fx * (v01 - v00)
-            bot = v10 + fx * (v11 - v10)
-            dfx[i] = (1 - fy) * (v01 - v00) + fy * (v11 - v10)
-            dfy[i] = bot - top
-            f[i] = top + fy * (bot - top)
+        for i in range(n):  # bilinear lookups
+            f[i], dfx[i], dfy[i] = _bilinear_cell(g, cx[i], cy[i])
         for i in range(n):  # per metre (vectorized; 0 / res is 0 outside)
             dfx[i] = dfx[i] / res
             dfy[i] = dfy[i] / res

@@ -151,23 +151,8 @@ def _correlative(
     na = math.ceil(window.angular_search_window / window.angular_step)
     thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
     wc = math.ceil(window.linear_search_window / res)
-    if compiled and window.levels == 0 and separation == math.inf:  # the front end's search
-        a, dy, dx, best = kernels.exhaustive_search_of_points(
-            field.field,
-            field.window_max(wc),
-            np.ascontiguousarray(pts, dtype=np.float64),
-            np.cos(thetas),
-            np.sin(thetas),
-            prior.x,
-            prior.y,
-            float(field.origin[0]),
-            float(field.origin[1]),
-            res,
-            wc,
-        )
-        return Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a]))), best, 0.0
     if compiled:  # (A, N) cells of the points at each angle and zero offset
-        rows0, cols0 = kernels.rotated_cells(
+        cell_args = (
             np.ascontiguousarray(pts, dtype=np.float64),
             np.cos(thetas),
             np.sin(thetas),
@@ -177,6 +162,13 @@ def _correlative(
             float(field.origin[1]),
             res,
         )
+        if window.levels == 0 and separation == math.inf:  # the front end's search: one call
+            a, dy, dx, best = kernels.exhaustive_search_of_points(
+                field.field, field.window_max(wc), *cell_args, wc
+            )
+            pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+            return pose, best, 0.0
+        rows0, cols0 = kernels.rotated_cells(*cell_args)
     else:
         rot = _rotations(pts, thetas) + np.array([prior.x, prior.y])  # (A, N, 2)
         cell = np.floor((rot - field.origin) / res).astype(np.int64)
