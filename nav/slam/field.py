@@ -35,11 +35,12 @@ def _kernel(sigma: float, resolution: float) -> np.ndarray:
 def _window_kernel(sigma: float, resolution: float, half: int) -> np.ndarray:
     """:func:`_kernel` spread by a +-``half`` cell window, dense ((2 (R + half) + 1)^2 float32
     weights centred on the cell, R the kernel's radius): at each offset the largest weight within
-    ``half`` cells of it, so a splat of it is at least the window max of a splat of the kernel."""
+    ``half`` cells of it, so a splat of it is at least the window max of a splat of the kernel
+    (``half`` 0: the kernel itself as a dense square, what the field is splatted with)."""
     k = _kernel(sigma, resolution)
     rad = int(np.abs(k[:, :2]).max())
     dense = np.zeros((2 * rad + 1, 2 * rad + 1), dtype=np.float32)
-    dense[k[:, 0].astype(int) + rad, k[:, 1].astype(int) + rad] = k[:, 2]  # as splat casts them
+    dense[k[:, 0].astype(int) + rad, k[:, 1].astype(int) + rad] = k[:, 2]  # float32, as the field
     spread = np.zeros((2 * (rad + half) + 1,) * 2, dtype=np.float32)
     for dy in range(2 * half + 1):
         for dx in range(2 * half + 1):
@@ -75,12 +76,13 @@ class LikelihoodField:
         """Field of a log-odds grid; cells with ``l > 0`` count as occupied; ``sigma`` in metres.
 
         The Gaussian is truncated at 3 sigma, so ``F`` is a max of small kernels, one splatted
-        around each occupied cell (compiled, :func:`nav.slam.kernels.splat`; the numpy reference is
-        :func:`field_reference`), and updated by splatting only the newly occupied cells afterwards
-        (:meth:`splat`)."""
+        around each occupied cell (compiled, :func:`nav.slam.kernels.splat_dense` of the kernel as a
+        dense square, whose contiguous rows vectorize: ~2x faster than its offset list, the same
+        maxima; the numpy reference is :func:`field_reference`), and updated by splatting only the
+        newly occupied cells afterwards (:meth:`splat`)."""
         rows, cols = np.nonzero(grid.logodds > 0.0)
         f = np.zeros(grid.shape, dtype=np.float32)
-        kernels.splat(f, rows, cols, _kernel(sigma, grid.resolution))
+        kernels.splat_dense(f, rows, cols, _window_kernel(sigma, grid.resolution, 0))
         obj = cls(f, grid.origin, grid.resolution, levels)
         obj.sigma = sigma
         # the occupied cells are a few percent of a submap's: its first window max splats the
@@ -100,7 +102,10 @@ class LikelihoodField:
         if points.shape[0] == 0:
             raise ValueError("no points to build a likelihood field from")
         f, lox, loy, rows, cols = kernels.points_field(
-            np.ascontiguousarray(points, dtype=np.float64), resolution, margin, _kernel(sigma, resolution)
+            np.ascontiguousarray(points, dtype=np.float64),
+            resolution,
+            margin,
+            _window_kernel(sigma, resolution, 0),
         )
         obj = cls(f, np.array([lox, loy]), resolution, levels)
         obj.sigma = sigma
@@ -128,7 +133,7 @@ class LikelihoodField:
         if cells.size == 0:
             return
         rows, cols = np.divmod(cells, self.field.shape[1])
-        kernels.splat(self.field, rows, cols, _kernel(self.sigma, self.resolution))
+        kernels.splat_dense(self.field, rows, cols, _window_kernel(self.sigma, self.resolution, 0))
         self.pooled = [self.field]
         self._phases = {}
         self._splatted = None
