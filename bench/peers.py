@@ -59,7 +59,7 @@ from nav.control import DwaController, DwaOptions, NoValidControl
 from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
 from nav.planning.kernel import octile_search
-from nav.slam.coverage import observed_by_scan
+from nav.slam.coverage import observed_by_scan, observed_subset
 from nav.slam.field import LikelihoodField
 from nav.slam.matcher import RefineOptions, match_scan_with_fallback
 from nav.slam.metric import parse_relations, relative_poses
@@ -262,9 +262,9 @@ class NavdeckScanMatcher:
         field = LikelihoodField.from_points(reference, self.resolution, self.sigma)
         # as the front end leaves out points its submap has not observed, chosen at the prediction
         # (the live mapping stage's unobserved_points_at_prediction), within one cell of a return
-        keep = observed_by_scan(scan, MATCH_RANGE, current, self.resolution, prior)
-        if 3 <= np.count_nonzero(keep) < len(keep):
-            current = current[keep]
+        kept = observed_subset(current, observed_by_scan(scan, MATCH_RANGE, current, self.resolution, prior))
+        if kept is not None:
+            current = kept
         pose, _ = match_scan_with_fallback(
             field, current, prior, self.window, self.wide, self.minimum_score, self.refine
         )

@@ -64,3 +64,11 @@ def observed_by_scan_reference(
     neighbours = np.maximum(reach[np.maximum(j - 1, 0)], reach[np.minimum(j + 1, n - 1)])
     reach_m = np.maximum(reach[j], neighbours) + margin
     return inside & (x * x + y * y <= reach_m * reach_m)
+
+
+def observed_subset(points: np.ndarray, observed: np.ndarray) -> np.ndarray | None:
+    """The ``observed`` ones of ``points`` to match instead of all of them, or None when every point
+    is observed or fewer than 3 are (too few to match: all are matched then), as the SLAM front end
+    chooses for a submap and the scan-to-scan match for a reference scan."""
+    kept = int(np.count_nonzero(observed))
+    return points[observed] if 3 <= kept < len(observed) else None

@@ -22,6 +22,7 @@ from typing import Literal
 import numpy as np
 
 from nav.grid import LogOddsOptions
+from nav.slam.coverage import observed_subset
 from nav.slam.loop_closure import (
     GlobalProposal,
     LoopCandidate,
@@ -606,9 +607,9 @@ class GraphSlam:
                 if not o.unobserved_points_at_prediction:
                     first = self._search(target, match_pts, prior, window)
                     ref = prior if _close(first[0], prior, o.resolution) else first[0]
-                keep = target.observed(ref.transform_points(match_pts))
-                if 3 <= np.count_nonzero(keep) < len(keep):
-                    first = self._search(target, match_pts[keep], prior, window)
+                kept = observed_subset(match_pts, target.observed(ref.transform_points(match_pts)))
+                if kept is not None:
+                    first = self._search(target, kept, prior, window)
                 elif first is None:
                     first = self._search(target, match_pts, prior, window)
                 in_submap, self.last_score = first
