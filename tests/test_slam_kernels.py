@@ -114,8 +114,10 @@ def test_compiled_refinement_equals_the_reference(offset: tuple[float, float, fl
 def test_search_with_the_compiled_scores_finds_the_true_pose() -> None:
     g, pts = box_world_grid(5)
     field = LikelihoodField.from_grid(g, levels=2)
-    for levels in (0, 2):
-        window = SearchWindow(0.3, math.radians(15), math.radians(0.5), levels=levels)
+    for levels, top_level_points in ((0, None), (2, None), (2, 25)):
+        window = SearchWindow(
+            0.3, math.radians(15), math.radians(0.5), levels=levels, top_level_points=top_level_points
+        )
         pose, score = correlative_search(field, pts, Pose2D(0.17, -0.12, math.radians(6)), window)
         assert math.hypot(pose.x, pose.y) < 0.05 and abs(pose.theta) < math.radians(1.0), pose
         assert score > 0.6
@@ -181,15 +183,18 @@ def test_compiled_max_pooling_equals_the_reference(level: int) -> None:
 
 
 @pytest.mark.parametrize(
-    ("levels", "half_width", "max_points"), [(2, 0.5, 100), (4, 1.5, 100), (3, 0.5, 200)]
+    ("levels", "half_width", "max_points", "top_level_points"),
+    [(2, 0.5, 100, None), (4, 1.5, 100, None), (3, 0.5, 200, None), (2, 0.5, 100, 25), (3, 0.5, 200, 7)],
 )
 def test_compiled_coarse_to_fine_search_equals_the_reference(
-    levels: int, half_width: float, max_points: int
+    levels: int, half_width: float, max_points: int, top_level_points: int | None
 ) -> None:
     g, pts = box_world_grid(30 + levels)
     field = LikelihoodField.from_grid(g, levels=levels)
     prior = Pose2D(0.3, -0.2, math.radians(8))
-    window = SearchWindow(half_width, math.radians(20), math.radians(0.5), levels, 48, max_points)
+    window = SearchWindow(
+        half_width, math.radians(20), math.radians(0.5), levels, 48, max_points, top_level_points
+    )
     fast = correlative_search_runner_up(field, pts, prior, window, 0.5)
     ref = correlative_search_reference(field, pts, prior, window, 0.5)
     assert fast == ref  # pose, score and runner-up bit for bit

@@ -44,6 +44,9 @@ class SearchWindow:
     """Candidates kept per level when ``levels > 0``."""
     max_points: int = 100
     """The search scores at most this many points (evenly thinned); refinement uses all."""
+    top_level_points: int | None = None
+    """With ``levels > 0`` (the beam): the top level ranks its blocks by at most this many of those
+    points (evenly thinned; None: all of them); the levels below score them all."""
     branch_and_bound: bool = False
     """With ``levels > 0`` and no runner-up asked: depth-first branch-and-bound over the ``levels``
     pooled fields (:mod:`nav.slam.branch_and_bound`), which returns the exhaustive search's
@@ -88,6 +91,15 @@ def _top_candidates(angles: int, lo: int, nb: int) -> np.ndarray:
     cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
     cand.setflags(write=False)
     return cand
+
+
+def _top_level_points(rows0: np.ndarray, cols0: np.ndarray, limit: int | None) -> tuple[np.ndarray, np.ndarray]:
+    """The (A, N) cells of at most ``limit`` of the points (evenly thinned; None: all)."""
+    n = rows0.shape[1]
+    if limit is None or n <= limit:
+        return rows0, cols0
+    keep = _thinned(n, limit)
+    return np.ascontiguousarray(rows0[:, keep]), np.ascontiguousarray(cols0[:, keep])
 
 
 def score_candidates_reference(
@@ -215,12 +227,16 @@ def _correlative(
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
         if not compiled:
-            score = score_candidates_reference(field, level, rows0, cols0, cand, s)
+            top_rows, top_cols = rows0, cols0
+            if level == top > 0:
+                top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points)
+            score = score_candidates_reference(field, level, top_rows, top_cols, cand, s)
         elif level < top:
             score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
         else:  # every (angle, block) of the top level, in `cand`'s order
+            top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points if top else None)
             score = kernels.block_scores(
-                field.pooled[top], field.phase(top), rows0, cols0, int(blocks[0]), len(blocks), s
+                field.pooled[top], field.phase(top), top_rows, top_cols, int(blocks[0]), len(blocks), s
             )
             score = score.ravel()
         if level > 0 and len(cand) > window.beam:

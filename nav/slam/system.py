@@ -135,6 +135,10 @@ class SlamOptions:
     ``wide_search_branch_and_bound`` the depth of the branch-and-bound (Cartographer
     ``branch_and_bound_depth``: the result does not depend on it, only the time; on Intel's
     relation pairs 3 and 4 alike, 2 about 15 % slower)."""
+    wide_search_top_level_points: int | None = 25
+    """The wide search's top level ranks its blocks (4 x 4 cells at 2 levels) by this many of the
+    scan's points; the beam's lower levels score all of them (None: all at every level). The top
+    level is most of the wide search's time (121 angles x 36 blocks)."""
     wide_search_branch_and_bound: bool = False
     """The wide search by exact branch-and-bound from the narrow match (the exhaustive search's
     result) rather than the beam. Off: measured no faster (docs/slam.md, stop 33), and the exact
@@ -309,6 +313,7 @@ class SlamOptions:
             self.angular_search_step,
             self.wide_search_levels,
             branch_and_bound=self.wide_search_branch_and_bound,
+            top_level_points=self.wide_search_top_level_points,
         )
         return narrow, wide
 
