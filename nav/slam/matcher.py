@@ -93,7 +93,9 @@ def _top_candidates(angles: int, lo: int, nb: int) -> np.ndarray:
     return cand
 
 
-def _top_level_points(rows0: np.ndarray, cols0: np.ndarray, limit: int | None) -> tuple[np.ndarray, np.ndarray]:
+def _top_level_points(
+    rows0: np.ndarray, cols0: np.ndarray, limit: int | None
+) -> tuple[np.ndarray, np.ndarray]:
     """The (A, N) cells of at most ``limit`` of the points (evenly thinned; None: all)."""
     n = rows0.shape[1]
     if limit is None or n <= limit:
