@@ -31,7 +31,7 @@ from typing import Any, Literal, Protocol
 
 import numpy as np
 
-from nav.control import Controller, reset_patience
+from nav.control import Controller, prepare_retry
 from nav.control.dwa import DwaController
 from nav.control.errors import ControllerError, NoValidControl, PatienceExceeded
 from nav.control.goal_checker import GoalChecker
@@ -289,15 +289,19 @@ class Navigator:
             self._cancel_requested = True
 
     def resume(self) -> None:
-        """Leave STUCK after a recovery behaviour: reset progress tracking and the controller's
-        failure count, and replan. Only the count: the controller keeps its critics' memories and
-        band (a full ``reset()`` made the robot dither between chair legs), but a count left at its
-        limit would raise ``PatienceExceeded`` again on the very next cycle, and four recoveries
-        ran in 0.3 s while a walker stood in a door (Nav2 retries with a fresh FollowPath)."""
+        """Leave STUCK after a recovery behaviour: reset progress tracking, re-arm the goal checker,
+        ready the controller for a retry (``prepare_retry``: its failure count and goal window), and
+        replan. Not a full ``reset()``: the controller keeps its critics' memories and band (that
+        made the robot dither between chair legs), but a count left at its limit would raise
+        ``PatienceExceeded`` again on the very next cycle, and four recoveries ran in 0.3 s while
+        a walker stood in a door (Nav2 retries with a fresh FollowPath, which also re-arms its goal
+        checker: a position latched before the recovery, the robot turning to the goal's heading,
+        no longer counts once a back-up has moved the robot away)."""
         if self.state == NavState.STUCK:
             self._clear_stuck()
+            self.goal_checker.reset()
             self.progress_checker.reset()
-            reset_patience(self.controller)
+            prepare_retry(self.controller)
             self._force_plan = "resume"
 
     def path_ahead(self, distance: float) -> np.ndarray:

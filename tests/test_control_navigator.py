@@ -205,6 +205,25 @@ def test_resume_leaves_stuck_and_replans() -> None:
     assert ticks2[-1].outcome is not None and ticks2[-1].outcome.kind == "reached"
 
 
+def test_a_recovery_unlatches_the_goal_position() -> None:
+    """Inside xy_goal_tolerance the goal checker latches the position and only the heading is left
+    (Nav2's stateful checker); a recovery may then back the robot away. Resuming re-arms the check,
+    as Nav2's fresh FollowPath does, so the robot does not report the goal reached from 0.6 m away
+    once it has turned (seen in the apartment: "reached" 0.52 m from the goal after a back-up)."""
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav()
+    goal = Pose2D(5.0, 3.0, 0.0)
+    nav.set_goals([goal])
+    ticks, _ = run(nav, Pose2D(4.95, 3.0, math.pi / 2), cm, 0.5, moves=False)  # inside, heading off
+    assert ticks[-1].outcome is None
+    nav.halt("Stalled", "stalled while turning")
+    nav.resume()  # after a back-up recovery: 0.6 m away, facing the goal's heading
+    ticks, poses = run(nav, Pose2D(4.4, 3.0, 0.0), cm, 30.0, start=1.0)
+    assert ticks[0].outcome is None
+    assert ticks[-1].outcome is not None and ticks[-1].outcome.kind == "reached"
+    assert poses[-1].distance_to(goal) <= nav.goal_checker.options.xy_goal_tolerance
+
+
 def test_controller_patience_exceeded_is_stuck_with_its_name() -> None:
     occ = room()
     occ[55:66, 15:26] = True

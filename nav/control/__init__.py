@@ -20,12 +20,13 @@ class Controller(Protocol):
     def reset(self) -> None: ...
 
 
-def reset_patience(controller: Controller) -> None:
-    """Start ``controller``'s failure count (``failure_tolerance``) over, if it keeps one: DWA and TEB
-    do (``reset_patience``); a controller without it has no patience to reset."""
-    reset = getattr(controller, "reset_patience", None)
-    if callable(reset):
-        reset()
+def prepare_retry(controller: Controller) -> None:
+    """Ready ``controller`` to follow the same goal again after a recovery (Nav2 sends a fresh
+    FollowPath): DWA and TEB start their failure count (``failure_tolerance``) over and DWA re-arms
+    its goal window (``prepare_retry``); a controller without these has nothing to ready."""
+    prepare = getattr(controller, "prepare_retry", None)
+    if callable(prepare):
+        prepare()
 
 
 __all__ = [
@@ -43,5 +44,5 @@ __all__ = [
     "PatienceExceeded",
     "ProgressChecker",
     "ProgressCheckerOptions",
-    "reset_patience",
+    "prepare_retry",
 ]

@@ -142,12 +142,15 @@ class DwaController:
         for c in self.critics:
             c.reset()
 
-    def reset_patience(self) -> None:
-        """Start the failure count over (``failure_tolerance`` afresh) and keep everything else: after
-        a recovery the navigator retries the same goal (Nav2 sends a fresh FollowPath), and a count
-        left at its limit raised ``PatienceExceeded`` again on the very next cycle. The critics'
-        memories (oscillation, ...) stay: clearing them let the robot dither between chair legs."""
+    def prepare_retry(self) -> None:
+        """After a recovery the navigator retries the same goal (Nav2 sends a fresh FollowPath):
+        start the failure count over (``failure_tolerance`` afresh: a count left at its limit raised
+        ``PatienceExceeded`` again on the very next cycle) and re-arm the goal window (a back-up
+        recovery may have taken the robot out of it: latched, the critics only turned the robot to
+        the goal's heading 0.5 m away). The critics' memories (oscillation, ...) stay: clearing
+        them let the robot dither between chair legs."""
         self._fail_cycles = 0
+        self._in_window = False
 
     @property
     def goal(self) -> Pose2D | None:

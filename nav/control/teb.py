@@ -319,8 +319,8 @@ class TebController:
         self._fail_cycles = 0
         self.last_debug = None
 
-    def reset_patience(self) -> None:
-        """Start the failure count over and keep the band (see ``DwaController.reset_patience``)."""
+    def prepare_retry(self) -> None:
+        """Start the failure count over and keep the band (see ``DwaController.prepare_retry``)."""
         self._fail_cycles = 0
 
     @property
