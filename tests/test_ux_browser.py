@@ -88,28 +88,30 @@ def client_tabs(viewer) -> list[str]:
         return [c.tab for c in viewer.tabs.clients.values()]
 
 
-def view_client_tab(page, viewer, wait_s: float = 180.0) -> str:
-    """The tab of ``page``'s 3D view once viser counts that view as a client.
+def open_view_client(browser, url: str, viewer, wait_s: float = 180.0):
+    """A new tab on ``url`` (context, page) and its 3D view's tab, once viser counts that view as a
+    client.
 
     Two software-rendered views on a loaded machine: wait for the view to boot and connect, not to
     draw. In CI with another browser module on the other worker, a second view once took over 120 s to
     run its first script and once over 240 s to connect; alone under two busy loops it takes ~6 s.
     viser counts a client only after its first camera message, which the view sends from its render
-    loop, so the page is brought to the front (another page had the focus). Once (stop 35, two busy
-    loops) a view connected and never rendered in 600 s: a view not counted after ``wait_s`` is
-    reloaded once, as an operator would reload it."""
+    loop, so the page is brought to the front (another page had the focus). Twice under two busy loops
+    (stops 35 and 36) a view connected and never rendered, and reloading that page then timed out too
+    (its renderer hung): a view not counted after ``wait_s`` is closed with its context and opened in
+    a fresh one, once, as an operator would close a stuck tab and open another."""
     for attempt in range(2):
+        ctx, page = new_page(browser)
+        page.goto(url, wait_until="commit")  # "load" would wait for the 3D view's bundle
         tab = view_tab(page, timeout=600_000 if attempt == 0 else 300_000)
         page.bring_to_front()
         if wait_until(page, lambda t=tab: t in client_tabs(viewer), timeout=wait_s):
-            return tab
-        state = (
-            {"live connections' tabs": connection_tabs(viewer.server), "clients' tabs": client_tabs(viewer)},
-            page.evaluate(VIEW_STATE),
-        )
+            return ctx, page, tab
+        # (not the page's own state: a hung renderer would not answer an evaluate either)
+        state = {"connections' tabs": connection_tabs(viewer.server), "clients' tabs": client_tabs(viewer)}
         print(f"3D view connected but not counted as a client after {wait_s:.0f} s: {state}")
-        page.reload(wait_until="commit")
-    raise AssertionError("the 3D view never became a viser client, reloaded once", state)
+        ctx.close()
+    raise AssertionError("the 3D view never became a viser client, in two fresh tabs", state)
 
 
 def ground_click(page, server: EmbeddedServer) -> tuple[float, float]:
@@ -329,10 +331,8 @@ def test_layers_and_click_mode_belong_to_each_tab(browser, page, server: Embedde
     page.wait_for_timeout(1500)
     dark_a = view_luma(page)
     assert dark_a < lit_a - 5.0, (lit_a, dark_a)  # the map is really gone from A's view
-    ctx_b, other = new_page(browser)
+    ctx_b, other, tab_b = open_view_client(browser, server.url + "/", viewer)
     try:
-        other.goto(server.url + "/", wait_until="commit")  # "load" would wait for the 3D view's bundle
-        tab_b = view_client_tab(other, viewer)
         assert tab_a != tab_b
         box_b = other.frame_locator("#viewer").get_by_role("checkbox", name="Map", exact=True)
         box_b.wait_for(timeout=LONG)
