@@ -217,6 +217,7 @@ def _correlative(
     s = 1 << top
     blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
     cand = _top_candidates(len(thetas), int(blocks[0]), len(blocks))  # (C, 3) at level `top`
+    top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points if top else None)
     for level in range(top, -1, -1):
         s = 1 << level
         if level < top and compiled:
@@ -229,14 +230,11 @@ def _correlative(
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
         if not compiled:
-            top_rows, top_cols = rows0, cols0
-            if level == top > 0:
-                top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points)
-            score = score_candidates_reference(field, level, top_rows, top_cols, cand, s)
+            rows, cols = (top_rows, top_cols) if level == top else (rows0, cols0)
+            score = score_candidates_reference(field, level, rows, cols, cand, s)
         elif level < top:
             score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
         else:  # every (angle, block) of the top level, in `cand`'s order
-            top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points if top else None)
             score = kernels.block_scores(
                 field.pooled[top], field.phase(top), top_rows, top_cols, int(blocks[0]), len(blocks), s
             )
