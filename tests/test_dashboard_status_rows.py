@@ -16,12 +16,12 @@ from contextlib import contextmanager
 import httpx
 import pytest
 from conftest import BROWSER_MARKS, make_settings
+from patience import patient_url
 
 from app.embedded import EmbeddedServer, serve_in_thread
 from robot.profiles import load_profile
 from robot.serial.driver import wait_for
 from robot.serial.emulate import EmulatorPair
-from robot.serial.protocol import ParamId
 
 CHROMIUM = pathlib.Path("/usr/bin/chromium")
 LONG = 60_000  # ms
@@ -29,13 +29,6 @@ LONG = 60_000  # ms
 pytestmark = BROWSER_MARKS
 
 PROFILE = load_profile("skid4")
-
-
-def patient_url(pair: EmulatorPair) -> str:
-    """1 s firmware and host watchdogs: a starved thread on a loaded machine faults nothing here (a
-    pulled port still faults at once)."""
-    pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
-    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=1.0"
 
 
 @pytest.fixture

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from patience import patient_url
 
 from app.cli import main
 from nav.types import wrap_angle
@@ -244,8 +245,7 @@ def test_calibrate_over_serial_recovers_a_wrong_wheel_radius(tmp_path: Path, mon
         tape = TruthTape(pair)
         monkeypatch.setattr("builtins.input", tape.answer)
         out = tmp_path / "cal.toml"
-        url = pair.url() + "?link_timeout=1.0"  # a starved emulator is not what is calibrated here
-        pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
+        url = patient_url(pair)  # a starved emulator is not what is calibrated here
         argv = ["calibrate", "--robot", url, "--profile", str(wrong_toml(tmp_path))]
         argv += ["--distance", "0.5", "--speed", "0.25", "--turns", "0.6", "--turn-speed", "1.0"]
         try:
@@ -295,10 +295,9 @@ def test_set_firmware_asks_before_any_write_and_before_saving_to_flash(
 
         tape = TruthTape(pair)
         monkeypatch.setattr("builtins.input", operator)
-        pair.base.params[ParamId.CMD_TIMEOUT] = 1.0
         out = tmp_path / "wheelie.toml"
+        url = patient_url(pair)
         before = dict(pair.base.params)
-        url = pair.url() + "?link_timeout=1.0"
         argv = ["calibrate", "--robot", url, "--profile", str(wrong_toml(tmp_path))]
         argv += ["--distance", "0.5", "--speed", "0.25", "--turns", "0.6", "--turn-speed", "1.0"]
         argv += ["--write", str(out), "--set-firmware"]

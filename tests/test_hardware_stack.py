@@ -22,6 +22,7 @@ import httpx
 import pytest
 import serial
 from conftest import teleop_until, twist
+from patience import PATIENT_S, patient_url
 from websockets.sync.client import connect
 
 from app.cli import main
@@ -34,7 +35,7 @@ from robot.clock import RealClock
 from robot.profiles import load_profile
 from robot.serial.driver import wait_for
 from robot.serial.emulate import EmulatorPair
-from robot.serial.protocol import EStop, ParamId, Reset, VelocityCommand
+from robot.serial.protocol import EStop, Reset, VelocityCommand
 from robot.serial.pty import PtyPort
 
 PROFILE = load_profile("skid4")
@@ -133,19 +134,10 @@ def server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
     yield from _serve(tmp_path, pair.url())
 
 
-def patient(pair: EmulatorPair) -> str:
-    """For tests about something else than the watchdogs: a 2 s firmware command watchdog (its
-    maximum), a 3 s host link watchdog and a 3 s lidar silence limit, so emulator threads starved on a
-    loaded machine fault nothing (seen under CI load: the emulated lidar silent 1.1 s, the emulated base
-    1.05 s; a pulled port still faults at once). The robot URL to serve."""
-    pair.base.params[ParamId.CMD_TIMEOUT] = 2.0
-    return pair.url() + ("&" if "?" in pair.url() else "?") + "link_timeout=3.0&lidar_timeout=3.0"
-
-
 @pytest.fixture
 def patient_server(tmp_path: Path, pair: EmulatorPair) -> Iterator[EmbeddedServer]:
     """A server on ``patient`` watchdogs (a set-up that faulted all the same says so)."""
-    for srv in _serve(tmp_path, patient(pair)):
+    for srv in _serve(tmp_path, patient_url(pair)):
         assert srv.runtime.session.fault is None, srv.runtime.session.fault
         yield srv
 
@@ -394,7 +386,7 @@ def test_each_kinematics_is_served_over_the_emulators_and_driven_by_teleop(tmp_p
     profile_arg = str(docs_diff_profile(tmp_path)) if kind == "docs-diff" else kind
     profile = load_profile(profile_arg)
     with EmulatorPair(profile, world="box", link_dir=tmp_path / "dev", seed=5) as pair:
-        url = patient(pair)  # a starved emulator thread is not what is tested here
+        url = patient_url(pair)  # a starved emulator thread is not what is tested here
         with serve_in_thread(make_settings(tmp_path, robot=url, profile=profile_arg)) as server:
             session = server.runtime.session
             assert session.profile.kinematics == profile.kinematics
@@ -468,7 +460,7 @@ def test_a_base_without_a_lidar_drives_by_teleop_and_refuses_mapping_and_navigat
     """Issue 23 item 2: ``serial://BASE`` alone (``emulate base --no-lidar``) is served: no "lidar: no
     scan" fault however long it runs, teleop drives it, and every lidar mode is refused with the reason."""
     with EmulatorPair(PROFILE, world="box", link_dir=tmp_path / "dev", seed=6, lidar=False) as pair:
-        url = patient(pair)
+        url = patient_url(pair)
         assert "lidar=" not in url
         with serve_in_thread(make_settings(tmp_path, robot=url)) as server:
             session = server.runtime.session
@@ -506,7 +498,7 @@ def test_health_names_a_lidar_fault_and_clears_it_when_scans_return(
     assert session.health()["lidar"] is True and session.health()["lidar_fault"] is None
     assert pair.lidar is not None
     pair.lidar.faults.stall = True
-    assert wait_for(lambda: session.modes.mode.value == "fault", timeout=6.0)
+    assert wait_for(lambda: session.modes.mode.value == "fault", timeout=2 * PATIENT_S)
     health = httpx.get(f"{server.url}/api/robot", timeout=10).json()["health"]
     assert health["link"] == "ok" and "lidar" in (health["lidar_fault"] or "")
     pair.lidar.faults.stall = False
@@ -519,13 +511,13 @@ def test_health_names_a_lidar_fault_and_clears_it_when_scans_return(
 def test_the_robot_urls_lidar_timeout_lengthens_the_sessions_silence_limit(
     tmp_path: Path, pair: EmulatorPair
 ) -> None:
-    """``lidar_timeout=3.0`` in the robot URL must hold for the whole stack: the session's own
+    """``lidar_timeout=`` in the robot URL must hold for the whole stack: the session's own
     1.5 s backstop faulted a loaded CI machine at 2.0 s of silence despite it."""
-    settings = make_settings(tmp_path, robot=patient(pair))
+    settings = make_settings(tmp_path, robot=patient_url(pair))
     bundle = make_driver(settings.robot, load_profile(settings.profile), settings.world, RealClock(), 0)
     try:
-        assert bundle.lidar_timeout == 3.0
-        assert session_options(settings, bundle).lidar_timeout == 3.0
+        assert bundle.lidar_timeout == PATIENT_S
+        assert session_options(settings, bundle).lidar_timeout == PATIENT_S
     finally:
         bundle.driver.close()
     assert session_options(settings, DriverBundle(bundle.driver, None, Pose2D(), None)).lidar_timeout == 1.5
