@@ -11,7 +11,7 @@ from slam_worlds import box_world_grid, plateau_field
 from bench import peers
 from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
 from nav.slam import kernels
-from nav.slam.field import LikelihoodField, field_reference
+from nav.slam.field import LikelihoodField, _halved_window_kernels, _window_kernel, field_reference, halve_max
 from nav.slam.matcher import (
     RefineOptions,
     SearchWindow,
@@ -252,8 +252,8 @@ def test_compiled_window_max_equals_the_reference(shape: tuple[int, int], half: 
     field = LikelihoodField(grid, np.zeros(2), 0.05)
     fast = kernels.window_max(field.field, half)
     assert fast.shape == (shape[0] + 2 * half, shape[1] + 2 * half)
-    assert np.array_equal(fast, field.window_max_reference(half))
-    assert np.array_equal(field.window_max(half), fast)  # a field of an array: the exact pass
+    assert np.array_equal(halve_max(fast), field.window_max_reference(half))
+    assert np.array_equal(field.window_max(half), halve_max(fast))  # a field of an array: the exact pass
 
 
 @pytest.mark.parametrize("half", [1, 2, 4])
@@ -268,7 +268,8 @@ def test_search_bounds_cover_the_window_max_as_the_field_grows(half: int) -> Non
         bound = field.window_max(half)
         exact = field.window_max_reference(half)
         assert (bound >= exact).all()
-        edge = 2 * half + 4  # the kernel's radius (3 cells at sigma 0.05) plus the window, and more
+        # the kernel's radius (3 cells at sigma 0.05) plus the window, and more, in halved cells
+        edge = half + 3
         assert np.array_equal(bound[edge:-edge, edge:-edge], exact[edge:-edge, edge:-edge])
         for _ in range(3):
             field.splat(rng.choice(field.field.size, 25, replace=False))
@@ -379,3 +380,17 @@ def test_the_3x3_solve_refuses_what_numpys_refuses() -> None:
         kernels._solve3(np.eye(3), np.array([1.0, np.nan, 0.0]), pivots)
     with pytest.raises(np.linalg.LinAlgError, match="singular"):
         kernels._solve3(np.zeros((3, 3)), np.ones(3), pivots)
+
+
+@pytest.mark.parametrize("half", [1, 2, 3, 5])
+def test_a_halved_splat_is_the_halved_full_resolution_splat(half: int) -> None:
+    # the half-resolution bound splatted with each parity's kernel equals the full-resolution
+    # spread kernel's splat halved, next to the grid's edges too (every parity of centre)
+    rng = np.random.default_rng(half)
+    h, w = 30, 44  # even: a halved odd grid has a half-empty last block, which a splat may fill
+    rows, cols = rng.integers(-4, h + 4, 60), rng.integers(-4, w + 4, 60)
+    full = np.zeros((h, w), dtype=np.float32)
+    kernels.splat_dense(full, rows, cols, _window_kernel(0.05, 0.05, half))
+    halved = np.zeros(((h + 1) // 2, (w + 1) // 2), dtype=np.float32)
+    kernels.splat_halved(halved, rows, cols, _halved_window_kernels(0.05, 0.05, half))
+    assert np.array_equal(halved, halve_max(full))

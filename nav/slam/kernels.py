@@ -323,24 +323,27 @@ def gauss_newton(
         for i in range(n):  # per metre (vectorized; 0 / res is 0 outside)
             dfx[i] = dfx[i] / res
             dfy[i] = dfy[i] / res
-        h[:] = 0.0
-        b[:] = 0.0
+        # the sums in locals, not in h and b: LLVM cannot tell those arrays from the ones read
+        # here, so it stored and reloaded them every point (the same additions in the same order,
+        # so the same bits; ~10 % of a call)
+        h00 = h01 = h02 = h11 = h12 = h22 = b0 = b1 = b2 = 0.0
         for i in range(n):
             gx, gy = dfx[i], dfy[i]
             jt = gx * (-s * px[i] - c * py[i]) + gy * (c * px[i] - s * py[i])
             # J row = -wo (gx, gy, jt), residual wo (1 - f): J^T J and J^T r scale by wo^2
-            h[0, 0] += gx * gx
-            h[0, 1] += gx * gy
-            h[0, 2] += gx * jt
-            h[1, 1] += gy * gy
-            h[1, 2] += gy * jt
-            h[2, 2] += jt * jt
+            h00 += gx * gx
+            h01 += gx * gy
+            h02 += gx * jt
+            h11 += gy * gy
+            h12 += gy * jt
+            h22 += jt * jt
             e = 1.0 - f[i]
-            b[0] -= gx * e
-            b[1] -= gy * e
-            b[2] -= jt * e
-        h *= wo2
-        b *= wo2
+            b0 -= gx * e
+            b1 -= gy * e
+            b2 -= jt * e
+        h[0, 0], h[0, 1], h[0, 2] = h00 * wo2, h01 * wo2, h02 * wo2
+        h[1, 1], h[1, 2], h[2, 2] = h11 * wo2, h12 * wo2, h22 * wo2
+        b[0], b[1], b[2] = b0 * wo2, b1 * wo2, b2 * wo2
         h[1, 0] = h[0, 1]
         h[2, 0] = h[0, 2]
         h[2, 1] = h[1, 2]
@@ -384,25 +387,42 @@ def window_max(grid: np.ndarray, half: int) -> np.ndarray:
     return q[: h + 2 * half, : w + 2 * half].copy()
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _splat_one(field: np.ndarray, r: int, c: int, kernel: np.ndarray) -> None:
+    """``field[r + dy, c + dx] = max(field, kernel[dy + R, dx + R])`` for the dense square
+    ``kernel`` ((2 R + 1)^2 weights centred on (r, c)), the part outside the grid skipped."""
+    h, w = field.shape
+    rad = kernel.shape[0] // 2
+    r0, c0 = r - rad, c - rad
+    if r0 >= 0 and c0 >= 0 and r0 + 2 * rad < h and c0 + 2 * rad < w:  # the usual case
+        for j in range(2 * rad + 1):
+            for k in range(2 * rad + 1):
+                v, kv = field[r0 + j, c0 + k], kernel[j, k]
+                field[r0 + j, c0 + k] = kv if kv > v else v
+        return
+    for j in range(max(-r0, 0), min(h - r0, 2 * rad + 1)):
+        for k in range(max(-c0, 0), min(w - c0, 2 * rad + 1)):
+            v, kv = field[r0 + j, c0 + k], kernel[j, k]
+            field[r0 + j, c0 + k] = kv if kv > v else v
+
+
 @njit(cache=True, nogil=True)
 def splat_dense(field: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernel: np.ndarray) -> None:
     """The maxima of a dense square ``kernel`` ((2 R + 1)^2 weights centred on the cell), row
     by row: ``field[r + dy, c + dx] = max(field, kernel[dy + R, dx + R])``, in place, the part
     outside the grid skipped. Contiguous rows vectorize (~2x faster than a list of offsets)."""
-    h, w = field.shape
-    rad = kernel.shape[0] // 2
     for i in range(rows.shape[0]):
-        r0, c0 = rows[i] - rad, cols[i] - rad
-        if r0 >= 0 and c0 >= 0 and r0 + 2 * rad < h and c0 + 2 * rad < w:  # the usual case
-            for j in range(2 * rad + 1):
-                for k in range(2 * rad + 1):
-                    v, kv = field[r0 + j, c0 + k], kernel[j, k]
-                    field[r0 + j, c0 + k] = kv if kv > v else v
-            continue
-        for j in range(max(-r0, 0), min(h - r0, 2 * rad + 1)):
-            for k in range(max(-c0, 0), min(w - c0, 2 * rad + 1)):
-                v, kv = field[r0 + j, c0 + k], kernel[j, k]
-                field[r0 + j, c0 + k] = kv if kv > v else v
+        _splat_one(field, rows[i], cols[i], kernel)
+
+
+@njit(cache=True, nogil=True)
+def splat_halved(bound: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernels: np.ndarray) -> None:
+    """:func:`splat_dense` on a half-resolution grid: the kernel splatted at full-resolution cell
+    (r, c) lands on half-resolution cell (r >> 1, c >> 1) as ``kernels[r & 1, c & 1]`` (each
+    parity's 2 x 2 maxima of the full-resolution kernel, ``field._halved_window_kernels``)."""
+    for i in range(rows.shape[0]):
+        r, c = rows[i], cols[i]
+        _splat_one(bound, r >> 1, c >> 1, kernels[r & 1, c & 1])
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -430,7 +450,8 @@ def exhaustive_search(
     (a, dy, dx) order, as in ``matcher.correlative_search_reference``.
 
     Without a runner-up, angles are scored in the order of their bound (``bound`` is
-    :func:`window_max` of ``grid`` at ``wc``, or more) and the search stops at the
+    ``LikelihoodField.window_max(wc)``: :func:`window_max` of ``grid`` at ``wc``, or more, at half
+    resolution, cell (r + wc, c + wc) at (r + wc) >> 1, (c + wc) >> 1) and the search stops at the
     first angle whose bound is below the best score found: none of the rest can reach it, so the
     result is the full search's, bit for bit (the tie-break compares (a, dy, dx) explicitly)."""
     na, n = rows0.shape
@@ -446,11 +467,12 @@ def exhaustive_search(
         order = np.arange(na)
         ub = np.full(na, np.float32(np.inf))
     else:
-        # each angle's points' window maxima, summed as the scores are: float32 rounding is
-        # monotone, so this is at least every score at that angle, bit for bit (an exact bound)
+        # each angle's points' window maxima (at half resolution: the max over a 2 x 2 block
+        # of cells' windows), summed as the scores are: float32 rounding is monotone, so this is
+        # at least every score at that angle, bit for bit (an exact bound)
         at_angle = np.zeros((na, 3), dtype=np.int64)
         at_angle[:, 0] = np.arange(na)
-        ub = score_candidates(bound, rows0 + wc, cols0 + wc, at_angle, 1)
+        ub = score_candidates(bound, (rows0 + wc) >> 1, (cols0 + wc) >> 1, at_angle, 1)
         order = np.argsort(-ub)
     best = np.float32(-1.0)
     best_dist = 0
