@@ -76,6 +76,15 @@ def _thinned(n: int, m: int) -> np.ndarray:
     return idx
 
 
+@functools.lru_cache(maxsize=16)
+def _angle_offsets(step: float, na: int) -> np.ndarray:
+    """``step * (-na .. na)``: a window's angles about its prior (cached, read-only; the same
+    products as computing them per search, so the same angles)."""
+    offsets = step * np.arange(-na, na + 1)
+    offsets.setflags(write=False)
+    return offsets
+
+
 def _rotations(pts: np.ndarray, thetas: np.ndarray) -> np.ndarray:
     """(A, N, 2) points rotated by each angle."""
     c, s = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
@@ -163,7 +172,7 @@ def _correlative(
         pts = pts[_thinned(pts.shape[0], window.max_points)]
     res = field.resolution
     na = math.ceil(window.angular_search_window / window.angular_step)
-    thetas = prior.theta + window.angular_step * np.arange(-na, na + 1)
+    thetas = prior.theta + _angle_offsets(window.angular_step, na)
     wc = math.ceil(window.linear_search_window / res)
     if compiled:  # (A, N) cells of the points at each angle and zero offset
         cell_args = (
@@ -271,8 +280,8 @@ def refine_pose(
         float(field.origin[1]),
         field.resolution,
         np.ascontiguousarray(pts, dtype=np.float64),
-        initial.as_array().astype(np.float64),
-        prior.as_array().astype(np.float64),
+        np.array((initial.x, initial.y, initial.theta), dtype=np.float64),
+        np.array((prior.x, prior.y, prior.theta), dtype=np.float64),
         options.occupied_space_weight,
         options.translation_weight,
         options.rotation_weight,
