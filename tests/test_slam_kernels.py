@@ -18,6 +18,8 @@ from nav.slam.matcher import (
     correlative_search,
     correlative_search_reference,
     correlative_search_runner_up,
+    match_scan,
+    match_scan_with_fallback,
     refine_pose,
     refine_pose_reference,
     score_candidates_reference,
@@ -394,3 +396,27 @@ def test_a_halved_splat_is_the_halved_full_resolution_splat(half: int) -> None:
     halved = np.zeros(((h + 1) // 2, (w + 1) // 2), dtype=np.float32)
     kernels.splat_halved(halved, rows, cols, _halved_window_kernels(0.05, 0.05, half))
     assert np.array_equal(halved, halve_max(full))
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_the_one_call_match_equals_search_then_refinement(seed: int) -> None:
+    # match_scan's exhaustive window runs the search and the refinement in one compiled call
+    # (kernels.exhaustive_match): the same pose and score as the two separate calls, bit for bit,
+    # more points than the search scores included (the refinement uses them all)
+    rng = np.random.default_rng(300 + seed)
+    g, pts = box_world_grid(60 + seed)
+    field = LikelihoodField.from_grid(g)
+    refine = RefineOptions(translation_weight=3.0, rotation_weight=10.0)
+    for n in (40, 100, 250):
+        p = pts[rng.choice(len(pts), min(n, len(pts)), replace=False)]
+        prior = Pose2D(*rng.uniform([-0.1, -0.1, -0.15], [0.1, 0.1, 0.15]))
+        window = SearchWindow(0.1, math.radians(10.0), math.radians(0.5))
+        coarse, _ = correlative_search(field, p, prior, window)
+        assert match_scan(field, p, prior, window, refine) == refine_pose(field, p, coarse, coarse, refine)
+        # minimum score 2 (above any): the wide search always runs, its match kept when it scores more
+        wide = SearchWindow(0.3, math.radians(20.0), math.radians(1.0), levels=2)
+        pose, score = match_scan_with_fallback(field, p, prior, window, wide, 2.0, refine)
+        narrow = refine_pose(field, p, coarse, coarse, refine)
+        wide_coarse, _ = correlative_search(field, p, prior, wide)
+        widened = refine_pose(field, p, wide_coarse, wide_coarse, refine)
+        assert (pose, score) == (widened if widened[1] > narrow[1] else narrow)

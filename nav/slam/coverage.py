@@ -71,4 +71,5 @@ def observed_subset(points: np.ndarray, observed: np.ndarray) -> np.ndarray | No
     is observed or fewer than 3 are (too few to match: all are matched then), as the SLAM front end
     chooses for a submap and the scan-to-scan match for a reference scan."""
     kept = int(np.count_nonzero(observed))
-    return points[observed] if 3 <= kept < len(observed) else None
+    # np.compress: the same rows as points[observed], without boolean indexing's set-up (~half)
+    return np.compress(observed, points, axis=0) if 3 <= kept < len(observed) else None

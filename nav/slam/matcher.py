@@ -113,6 +113,20 @@ def _top_level_points(
     return np.ascontiguousarray(rows0[:, keep]), np.ascontiguousarray(cols0[:, keep])
 
 
+def _lattice(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow
+) -> tuple[np.ndarray, np.ndarray, int, int]:
+    """A search's points (at most ``window.max_points``, evenly thinned), its angles, the number
+    of angle steps each side of the prior and the window's half-width in cells."""
+    if pts.shape[0] == 0:
+        raise ScanMatchError("no points to match")
+    if pts.shape[0] > window.max_points:
+        pts = np.take(pts, _thinned(pts.shape[0], window.max_points), axis=0)  # = pts[idx], cheaper
+    na = math.ceil(window.angular_search_window / window.angular_step)
+    thetas = prior.theta + _angle_offsets(window.angular_step, na)
+    return pts, thetas, na, math.ceil(window.linear_search_window / field.resolution)
+
+
 def score_candidates_reference(
     field: LikelihoodField, level: int, rows0: np.ndarray, cols0: np.ndarray, cand: np.ndarray, step: int
 ) -> np.ndarray:
@@ -166,14 +180,8 @@ def _correlative(
 ) -> tuple[Pose2D, float, float]:
     """The correlative search, scored by the numba kernels (``compiled``) or by numpy.
     ``incumbent``: see :func:`correlative_search`."""
-    if pts.shape[0] == 0:
-        raise ScanMatchError("no points to match")
-    if pts.shape[0] > window.max_points:
-        pts = pts[_thinned(pts.shape[0], window.max_points)]
+    pts, thetas, na, wc = _lattice(field, pts, prior, window)
     res = field.resolution
-    na = math.ceil(window.angular_search_window / window.angular_step)
-    thetas = prior.theta + _angle_offsets(window.angular_step, na)
-    wc = math.ceil(window.linear_search_window / res)
     if compiled:  # (A, N) cells of the points at each angle and zero offset
         cell_args = (
             np.ascontiguousarray(pts, dtype=np.float64),
@@ -442,8 +450,42 @@ def match_scan(
 ) -> tuple[Pose2D, float]:
     """Correlative search around ``prior`` then least-squares refinement (the refinement is
     regularized towards the correlative result, as Cartographer does)."""
-    coarse, _ = correlative_search(field, pts, prior, window)
-    return refine_pose(field, pts, coarse, coarse, refine)
+    return _search_and_refine(field, pts, prior, window, refine)[2:]
+
+
+def _search_and_refine(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, window: SearchWindow, refine: RefineOptions
+) -> tuple[Pose2D, float, Pose2D, float]:
+    """:func:`correlative_search` then :func:`refine_pose` from (and towards) its pose: the
+    search's pose and score, then the refined ones. An exhaustive window (no levels) is one
+    compiled call (:func:`nav.slam.kernels.exhaustive_match`, the same kernels)."""
+    if window.levels != 0:
+        coarse, coarse_score = correlative_search(field, pts, prior, window)
+        pose, score = refine_pose(field, pts, coarse, coarse, refine)
+        return coarse, coarse_score, pose, score
+    search_pts, thetas, _, wc = _lattice(field, pts, prior, window)
+    c, best, x, score = kernels.exhaustive_match(
+        field.field,
+        field.window_max(wc),
+        np.ascontiguousarray(search_pts, dtype=np.float64),
+        thetas,
+        np.cos(thetas),
+        np.sin(thetas),
+        prior.x,
+        prior.y,
+        float(field.origin[0]),
+        float(field.origin[1]),
+        field.resolution,
+        wc,
+        np.ascontiguousarray(pts, dtype=np.float64),
+        refine.occupied_space_weight,
+        refine.translation_weight,
+        refine.rotation_weight,
+        refine.max_iterations,
+        refine.tolerance,
+    )
+    coarse = Pose2D(float(c[0]), float(c[1]), float(c[2]))
+    return coarse, best, Pose2D(float(x[0]), float(x[1]), float(x[2])), score
 
 
 def match_scan_with_fallback(
@@ -462,8 +504,7 @@ def match_scan_with_fallback(
     search that lands where the narrow one did is not refined again: the refinement would start
     from the same pose towards the same prior, so end where the first one did (the 7 wide searches
     of the 50 Intel relation pairs all did)."""
-    coarse, coarse_score = correlative_search(field, pts, prior, window)
-    pose, score = refine_pose(field, pts, coarse, coarse, refine)
+    coarse, coarse_score, pose, score = _search_and_refine(field, pts, prior, window, refine)
     if score < minimum_score:
         seed = (coarse, coarse_score) if nested(window, wide_window) else None
         wide_coarse, _ = correlative_search(field, pts, prior, wide_window, seed)
