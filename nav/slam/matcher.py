@@ -127,6 +127,24 @@ def _lattice(
     return pts, thetas, na, math.ceil(window.linear_search_window / field.resolution)
 
 
+def _cell_args(
+    field: LikelihoodField, pts: np.ndarray, prior: Pose2D, thetas: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, float, float, float, float, float]:
+    """The arguments :func:`nav.slam.kernels.rotated_cells` (and the searches built on it) take:
+    the points, the angles' cosines and sines (numpy's, as the reference uses), the prior's
+    position, the field's origin and resolution."""
+    return (
+        np.ascontiguousarray(pts, dtype=np.float64),
+        np.cos(thetas),
+        np.sin(thetas),
+        prior.x,
+        prior.y,
+        float(field.origin[0]),
+        float(field.origin[1]),
+        field.resolution,
+    )
+
+
 def score_candidates_reference(
     field: LikelihoodField, level: int, rows0: np.ndarray, cols0: np.ndarray, cand: np.ndarray, step: int
 ) -> np.ndarray:
@@ -183,16 +201,7 @@ def _correlative(
     pts, thetas, na, wc = _lattice(field, pts, prior, window)
     res = field.resolution
     if compiled:  # (A, N) cells of the points at each angle and zero offset
-        cell_args = (
-            np.ascontiguousarray(pts, dtype=np.float64),
-            np.cos(thetas),
-            np.sin(thetas),
-            prior.x,
-            prior.y,
-            float(field.origin[0]),
-            float(field.origin[1]),
-            res,
-        )
+        cell_args = _cell_args(field, pts, prior, thetas)
         if window.levels == 0 and separation == math.inf:  # the front end's search: one call
             a, dy, dx, best = kernels.exhaustive_search_of_points(
                 field.field, field.window_max(wc), *cell_args, wc
@@ -467,16 +476,9 @@ def _search_and_refine(
     c, best, x, score = kernels.exhaustive_match(
         field.field,
         field.window_max(wc),
-        np.ascontiguousarray(search_pts, dtype=np.float64),
-        thetas,
-        np.cos(thetas),
-        np.sin(thetas),
-        prior.x,
-        prior.y,
-        float(field.origin[0]),
-        float(field.origin[1]),
-        field.resolution,
+        *_cell_args(field, search_pts, prior, thetas),
         wc,
+        thetas,
         np.ascontiguousarray(pts, dtype=np.float64),
         refine.occupied_space_weight,
         refine.translation_weight,
