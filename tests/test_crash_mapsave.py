@@ -18,6 +18,7 @@ import time
 import zlib
 from pathlib import Path
 
+import httpx
 import numpy as np
 import pytest
 from conftest import ROOT
@@ -113,7 +114,6 @@ def test_kill9_server_during_map_import(tmp_path: Path) -> None:
         schema = server.get_json("/openapi.json")
         if "/api/maps/import" not in schema.get("paths", {}):
             pytest.skip("no map import route (POST /api/maps/import) in this build yet")
-        import httpx
 
         stop = threading.Event()
         done: list[str] = []

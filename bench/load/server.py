@@ -50,11 +50,13 @@ class ServerProcess:
     def log(self) -> str:
         return self.log_path.read_text(errors="replace") if self.log_path.exists() else ""
 
-    def get_json(self, path: str, timeout: float = 5.0):
+    # 30 s: a server starved by a loaded machine (tests under two busy loops) answering slowly is
+    # not what its callers test (a 5 s default timed out its first /openapi.json once)
+    def get_json(self, path: str, timeout: float = 30.0):
         with urllib.request.urlopen(self.base + path, timeout=timeout) as r:
             return json.loads(r.read())
 
-    def post_json(self, path: str, body: dict | None = None, timeout: float = 10.0):
+    def post_json(self, path: str, body: dict | None = None, timeout: float = 30.0):
         req = urllib.request.Request(
             self.base + path,
             data=json.dumps(body or {}).encode(),
