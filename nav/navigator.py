@@ -40,7 +40,7 @@ from nav.control.progress_checker import ProgressChecker
 from nav.control.teb import TebController
 from nav.control.teb_options import TebOptions
 from nav.planning.errors import NoValidPathFound, PlannerError
-from nav.types import LETHAL_OBSTACLE, ZERO_TWIST, Costmap, Path, Pose2D, Twist2D
+from nav.types import LETHAL_OBSTACLE, ZERO_TWIST, Costmap, Path, Pose2D, Twist2D, wrap_angle
 
 
 class GlobalPlanner(Protocol):
@@ -191,6 +191,7 @@ class Navigator:
         self._last_attempt_time = -math.inf
         self._last_plan_error: PlannerError | None = None
         self._stuck_reason = ""
+        self._stuck_message = ""
         self._stuck_error: BaseException | None = None
         self._stuck_since = 0.0
         self._cancel_requested = False
@@ -390,14 +391,20 @@ class Navigator:
 
         if self.state == NavState.STUCK:
             if now - self._stuck_since > self.options.stuck_timeout:
-                return self._fail(
-                    self._stuck_reason, str(self._stuck_error or self._stuck_reason), self._stuck_error
-                )
+                message = str(self._stuck_error) if self._stuck_error is not None else self._stuck_message
+                return self._fail(self._stuck_reason, message or self._stuck_reason, self._stuck_error)
             return self._tick(ZERO_TWIST)
 
         if not self.progress_checker.check(pose, now):
             allowance = self.progress_checker.options.movement_time_allowance
-            return self._stuck("NoProgress", f"moved less than the required radius in {allowance:g} s", None)
+            message = f"moved less than the required radius in {allowance:g} s"
+            if self.goal_checker.position_latched:  # the operator should know only the turn was left
+                left = abs(float(wrap_angle(goal.theta - pose.theta)))
+                message = (
+                    f"reached the goal's position ({math.hypot(pose.x - goal.x, pose.y - goal.y):.2f} m"
+                    f" away) but could not turn to its heading ({left:.2f} rad left) in {allowance:g} s"
+                )
+            return self._stuck("NoProgress", message, None)
         if self.state != NavState.FOLLOWING:
             self.progress_checker.reset_stall()
         elif self.progress_checker.stalled(self._last_cmd, velocity, now):
@@ -576,6 +583,7 @@ class Navigator:
             self._stuck_since = self._last_now if self._last_now is not None else 0.0
         self.state = NavState.STUCK
         self._stuck_reason, self._stuck_error = reason, error
+        self._stuck_message = message
         self._held = None
         self._activity = f"stuck: {message}"
 

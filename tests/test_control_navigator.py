@@ -193,6 +193,24 @@ def test_no_progress_reports_stuck_then_fails_after_the_timeout() -> None:
     assert 13.0 <= (len(ticks) - 1) * DT <= 13.3
 
 
+def test_no_progress_says_when_only_the_goals_heading_was_left() -> None:
+    # the README's mission in the stock apartment: the position reached (the stateful checker
+    # latched it) but the turn to the goal's heading refused; the failure says so, not just its name
+    cm = inflate(room(), inscribed=0.1)
+    nav = make_nav(options=NavigatorOptions(stuck_timeout=3.0))
+    nav.set_goals([Pose2D(3.1, 3.0, 0.0)])
+    ticks, _ = run(nav, Pose2D(3.0, 3.0, -1.0), cm, 20.0, moves=False)
+    out = ticks[-1].outcome
+    assert out is not None and out.kind == "failed" and out.reason == "NoProgress"
+    assert "could not turn to its heading (1.00 rad left)" in out.message, out.message
+    assert "reached the goal's position (0.10 m away)" in out.message, out.message
+    # far from the goal the message is the progress checker's own
+    nav = make_nav(options=NavigatorOptions(stuck_timeout=3.0))
+    nav.set_goals([Pose2D(5.0, 3.0, 0.0)])
+    ticks, _ = run(nav, Pose2D(1.0, 3.0, 0.0), cm, 20.0, moves=False)
+    assert ticks[-1].outcome.message == "moved less than the required radius in 10 s"
+
+
 def test_resume_leaves_stuck_and_replans() -> None:
     cm = inflate(room(), inscribed=0.1)
     nav = make_nav()

@@ -45,6 +45,11 @@ class GoalChecker:
     def reset(self) -> None:
         self._xy_latched = False
 
+    @property
+    def position_latched(self) -> bool:
+        """The goal's position was reached (stateful checker): only its heading is left."""
+        return self.options.stateful and self._xy_latched
+
     def xy_reached(self, pose: Pose2D, goal: Pose2D) -> bool:
         o = self.options
         if o.stateful and self._xy_latched:
