@@ -66,7 +66,8 @@ class Pose2D:
         return math.hypot(other.x - self.x, other.y - self.y)
 
     def as_array(self) -> np.ndarray:
-        return np.array([self.x, self.y, self.theta])
+        """(x, y, theta) as float64, whatever number types the pose was built with."""
+        return np.array([self.x, self.y, self.theta], dtype=np.float64)
 
     @staticmethod
     def from_array(a: np.ndarray | list[float] | tuple[float, ...]) -> Pose2D:
