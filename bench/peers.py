@@ -59,10 +59,8 @@ from nav.control import DwaController, DwaOptions, NoValidControl
 from nav.costmap.inflation import InflationOptions, inflate
 from nav.localization import Amcl, AmclOptions
 from nav.planning.kernel import octile_search
-from nav.slam.coverage import observed_by_scan, observed_subset
-from nav.slam.field import LikelihoodField
-from nav.slam.matcher import RefineOptions, match_scan_with_fallback
 from nav.slam.metric import parse_relations, relative_poses
+from nav.slam.scan_to_scan import ScanToScanMatcher
 from nav.slam.system import SlamOptions
 from nav.types import LETHAL_OBSTACLE, Costmap, GridGeometry, LaserScan, OccupancyGrid, Pose2D, Twist2D
 from nav.types import Path as NavPath
@@ -245,30 +243,16 @@ def _scan_points(scan: LaserScan) -> np.ndarray:
 
 
 class NavdeckScanMatcher:
-    """navdeck's scan-to-scan match: the reference's likelihood field, then the front end's search
-    (narrow window, the wide one below the front end's score threshold) and refinement."""
+    """navdeck's scan-to-scan match (:class:`nav.slam.scan_to_scan.ScanToScanMatcher`): the
+    reference's likelihood field, then the front end's search (narrow window, the wide one below
+    the front end's score threshold) and refinement."""
 
     def __init__(self) -> None:
-        o = SlamOptions()
-        self.resolution, self.sigma = o.resolution, o.likelihood_sigma
-        self.window, self.wide = o.front_end_windows()
-        self.minimum_score = o.wide_search_minimum_score
-        self.refine = RefineOptions(
-            translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
-        )
+        self.matcher = ScanToScanMatcher(SlamOptions(), MATCH_RANGE)
 
     def match(self, scan: LaserScan, reference: np.ndarray, current: np.ndarray, prior: Pose2D) -> Pose2D:
         """``current``'s pose in the frame of ``scan`` (whose returns are ``reference``)."""
-        field = LikelihoodField.from_points(reference, self.resolution, self.sigma)
-        # as the front end leaves out points its submap has not observed, chosen at the prediction
-        # (the live mapping stage's unobserved_points_at_prediction), within one cell of a return
-        kept = observed_subset(current, observed_by_scan(scan, MATCH_RANGE, current, self.resolution, prior))
-        if kept is not None:
-            current = kept
-        pose, _ = match_scan_with_fallback(
-            field, current, prior, self.window, self.wide, self.minimum_score, self.refine
-        )
-        return pose
+        return self.matcher.match(scan, reference, current, prior)[0]
 
 
 class KartoScanMatcher:

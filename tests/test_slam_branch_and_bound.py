@@ -17,6 +17,7 @@ from nav.slam.matcher import (
     correlative_search_reference,
     nested,
 )
+from nav.slam.scan_to_scan import ScanToScanMatcher
 from nav.slam.system import SlamOptions
 from nav.types import Pose2D
 
@@ -68,18 +69,18 @@ def test_the_narrow_match_as_incumbent_changes_nothing_on_intel_relation_pairs()
     if not (peers.INTEL_BAG.exists() and peers.INTEL_RELATIONS.exists()):
         pytest.skip(f"{peers.INTEL_BAG} missing")
     _, related, _ = peers.intel_pairs()
-    m = peers.NavdeckScanMatcher()
-    m.wide = SlamOptions(wide_search_branch_and_bound=True, wide_search_levels=4).front_end_windows()[1]
-    assert nested(m.window, m.wide)
+    m = ScanToScanMatcher()
+    wide = SlamOptions(wide_search_branch_and_bound=True, wide_search_levels=4).front_end_windows()[1]
+    assert nested(m.window, wide)
     for k, (ref, cur, prior) in enumerate(related):
         field = LikelihoodField.from_points(peers._scan_points(ref), m.resolution, m.sigma)
         pts = peers._scan_points(cur)
         narrow = correlative_search(field, pts, prior, m.window)
-        scratch = correlative_search(field, pts, prior, m.wide)
-        assert correlative_search(field, pts, prior, m.wide, narrow) == scratch
+        scratch = correlative_search(field, pts, prior, wide)
+        assert correlative_search(field, pts, prior, wide, narrow) == scratch
         assert scratch[1] >= narrow[1]
         if k % 10 == 0:  # the numpy reference scores all 121 x 441 candidates: a few suffice
-            ref_pose, ref_score, _ = correlative_search_reference(field, pts, prior, m.wide, math.inf)
+            ref_pose, ref_score, _ = correlative_search_reference(field, pts, prior, wide, math.inf)
             assert scratch == (ref_pose, ref_score)
 
 

@@ -11,6 +11,7 @@ from slam_worlds import box_world_grid, plateau_field
 from bench import peers
 from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
 from nav.slam import kernels
+from nav.slam.beam_search import best_candidate, score_children
 from nav.slam.field import LikelihoodField, _halved_window_kernels, _window_kernel, field_reference, halve_max
 from nav.slam.matcher import (
     RefineOptions,
@@ -29,6 +30,7 @@ from nav.slam.matcher import (
     translation_information_reference,
     window_moments_reference,
 )
+from nav.slam.scan_to_scan import ScanToScanMatcher
 from nav.slam.synthetic import box_world, cast_scan
 from nav.slam.system import grazing_shortening
 from nav.types import Pose2D
@@ -203,20 +205,45 @@ def test_compiled_coarse_to_fine_search_equals_the_reference(
     assert math.hypot(fast[0].x, fast[0].y) < 0.06
 
 
-@pytest.mark.parametrize(("step", "wc"), [(1, 10), (4, 10), (8, 40), (16, 40)])
-def test_compiled_candidate_split_equals_numpys(step: int, wc: int) -> None:
-    rng = np.random.default_rng(step)
+@pytest.mark.parametrize(("level", "wc", "n"), [(0, 10, 100), (1, 10, 37), (2, 40, 100), (3, 40, 200)])
+def test_compiled_children_and_scores_equal_numpys(level: int, wc: int, n: int) -> None:
+    # the beam's split of each kept candidate into its 4 children one level down and their scores:
+    # matcher._correlative's numpy split, then the numpy scores; points past every edge
+    rng = np.random.default_rng(level)
+    size = 120
+    field = LikelihoodField(rng.random((size, size)).astype(np.float32), np.zeros(2), 0.05, levels=level)
+    rows0 = rng.integers(-8, size + 8, (81, n))
+    cols0 = rng.integers(-8, size + 8, (81, n))
+    step = 1 << level
     lo = -(wc // (2 * step)) - 2
     cand = np.column_stack(
         (rng.integers(0, 81, 300), rng.integers(lo, -lo, 300), rng.integers(lo, -lo, 300))
     ).astype(np.int64)
-    kids = np.repeat(cand, 4, axis=0)  # the numpy split of matcher._correlative (compiled=False)
+    kids = np.repeat(cand, 4, axis=0)
     kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
     kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
     lo_y, lo_x = kids[:, 1] * step, kids[:, 2] * step
     inside = (lo_y + step - 1 >= -wc) & (lo_y <= wc) & (lo_x + step - 1 >= -wc) & (lo_x <= wc)
     assert 0 < np.count_nonzero(inside) < len(kids)  # both kept and dropped children
-    np.testing.assert_array_equal(kernels.split_candidates(cand, step, wc), kids[inside])
+    children, scores = score_children(field.pooled[level], rows0, cols0, cand, step, wc)
+    np.testing.assert_array_equal(children, kids[inside])
+    ref = score_candidates_reference(field, level, rows0, cols0, kids[inside], step)
+    assert np.array_equal(scores, ref)  # bit for bit
+
+
+def test_compiled_best_candidate_breaks_ties_as_numpys_lexsort() -> None:
+    rng = np.random.default_rng(3)
+    cand = np.column_stack(
+        (rng.integers(0, 41, 400), rng.integers(-9, 10, 400), rng.integers(-9, 10, 400))
+    ).astype(np.int64)
+    scores = rng.choice(np.array([0.5, 0.75, 0.8], dtype=np.float32), 400)  # many equal scores
+    a, dy, dx, best, runner_up = best_candidate(cand, scores, 20, 0.2, 0.05)
+    dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - 20)
+    k = np.lexsort((dist, -scores))[0]  # the numpy reference's pick
+    assert (a, dy, dx, best) == (*cand[k], float(scores[k]))
+    apart = np.hypot(cand[:, 1] - dy, cand[:, 2] - dx) * 0.05 > 0.2
+    assert runner_up == float(scores[apart].max())
+    assert best_candidate(cand, scores, 20, math.inf, 0.05)[4] == 0.0  # none apart
 
 
 def test_compiled_rotated_cells_equal_numpys() -> None:
@@ -318,7 +345,7 @@ def test_angle_pruned_search_equals_the_reference_on_intel_pairs() -> None:
     if not (peers.INTEL_BAG.exists() and peers.INTEL_RELATIONS.exists()):
         pytest.skip(f"{peers.INTEL_BAG} missing")
     consecutive, related, _ = peers.intel_pairs()
-    matcher = peers.NavdeckScanMatcher()
+    matcher = ScanToScanMatcher()
     for ref, cur, prior in consecutive + related:
         field = LikelihoodField.from_points(peers._scan_points(ref), matcher.resolution, matcher.sigma)
         pts = peers._scan_points(cur)

@@ -135,12 +135,18 @@ def phase_split(grid: np.ndarray, step: int) -> np.ndarray:
         raise ValueError("step must be a power of 2")
     if step == 1:
         return grid.reshape((1, 1, h, w))
+    shift = 0
+    while (1 << shift) < step:
+        shift += 1
     phase = np.zeros((step, step, -(-h // step), -(-w // step)), dtype=grid.dtype)
-    for pr in range(step):  # phase by phase: strided reads, contiguous writes, no division
+    # row by row: one contiguous read of the grid (phase by phase read each cache line ``step``
+    # times: ~1.5x the time)
+    for r in range(h):
+        pr, rr = r & (step - 1), r >> shift
         for pc in range(step):
-            for rr in range(-(-(h - pr) // step)):
-                for cc in range(-(-(w - pc) // step)):
-                    phase[pr, pc, rr, cc] = grid[rr * step + pr, cc * step + pc]
+            dst = phase[pr, pc, rr]
+            for cc in range(-(-(w - pc) // step)):
+                dst[cc] = grid[r, cc * step + pc]
     return phase
 
 
@@ -791,27 +797,6 @@ def accumulate_normal_equations(
                 data[pos[e, 1, 3 * a + b]] += hij
                 data[pos[e, 2, 3 * b + a]] += hij
                 data[pos[e, 3, 3 * a + b]] += hjj
-
-
-@njit(cache=True, nogil=True)
-def split_candidates(cand: np.ndarray, step: int, wc: int) -> np.ndarray:
-    """The children of coarse-to-fine candidates ``(angle, by, bx)`` one level down (block size
-    ``step`` cells): each splits into 4, ``(2 by + (0, 0, 1, 1), 2 bx + (0, 1, 0, 1))``, in that
-    order, and only those whose block meets the +-``wc`` cell window are kept. Reference: the numpy
-    ``repeat`` / ``tile`` split in ``matcher._correlative`` (``compiled=False``)."""
-    out = np.empty((4 * cand.shape[0], 3), dtype=cand.dtype)
-    m = 0
-    for k in range(cand.shape[0]):
-        for q in range(4):
-            by = 2 * cand[k, 1] + q // 2
-            bx = 2 * cand[k, 2] + q % 2
-            lo_y, lo_x = by * step, bx * step
-            if lo_y + step - 1 >= -wc and lo_y <= wc and lo_x + step - 1 >= -wc and lo_x <= wc:
-                out[m, 0] = cand[k, 0]
-                out[m, 1] = by
-                out[m, 2] = bx
-                m += 1
-    return out[:m]
 
 
 @njit(cache=True, nogil=True, inline="always")

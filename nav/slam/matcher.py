@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.slam import kernels
+from nav.slam.beam_search import best_candidate, score_children
 from nav.slam.branch_and_bound import branch_and_bound_search
 from nav.slam.field import LikelihoodField
 from nav.types import Pose2D, wrap_angle
@@ -238,7 +239,10 @@ def _correlative(
         )
         pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
         return pose, best, 0.0
-    top = 0 if exact else window.levels  # the reference of branch-and-bound: the exhaustive search
+    if compiled:
+        return _beam(field, rows0, cols0, thetas, prior, window, na, wc, separation)
+    # numpy: the beam, or with ``exact`` the exhaustive search (branch-and-bound's reference)
+    top = 0 if exact else window.levels
     field.ensure_levels(top)
     s = 1 << top
     blocks = np.arange(math.floor(-wc / s), math.floor(wc / s) + 1)
@@ -246,38 +250,61 @@ def _correlative(
     top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points if top else None)
     for level in range(top, -1, -1):
         s = 1 << level
-        if level < top and compiled:
-            cand = kernels.split_candidates(cand, s, wc)
-        elif level < top:  # split every kept candidate into its 4 children
+        if level < top:  # split every kept candidate into its 4 children
             kids = np.repeat(cand, 4, axis=0)
             kids[:, 1] = 2 * kids[:, 1] + np.tile([0, 0, 1, 1], len(cand))
             kids[:, 2] = 2 * kids[:, 2] + np.tile([0, 1, 0, 1], len(cand))
             lo_y, lo_x = kids[:, 1] * s, kids[:, 2] * s
             inside = (lo_y + s - 1 >= -wc) & (lo_y <= wc) & (lo_x + s - 1 >= -wc) & (lo_x <= wc)
             cand = kids[inside]  # a block meeting the window has at least one child that does
-        if not compiled:
-            rows, cols = (top_rows, top_cols) if level == top else (rows0, cols0)
-            score = score_candidates_reference(field, level, rows, cols, cand, s)
-        elif level < top:
-            score = kernels.score_candidates(field.pooled[level], rows0, cols0, cand, s)
-        else:  # every (angle, block) of the top level, in `cand`'s order
-            score = kernels.block_scores(
-                field.pooled[top], field.phase(top), top_rows, top_cols, int(blocks[0]), len(blocks), s
-            )
-            score = score.ravel()
+        rows, cols = (top_rows, top_cols) if level == top else (rows0, cols0)
+        score = score_candidates_reference(field, level, rows, cols, cand, s)
         if level > 0 and len(cand) > window.beam:
             keep = np.argpartition(-score, window.beam)[: window.beam]
             cand = cand[keep]
-        elif level == 0:
-            # tie-break towards the prior (smallest offset) for determinism
-            dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
-            best = np.lexsort((dist, -score))[0]
-            a, dy, dx = cand[best]
-            apart = np.hypot(cand[:, 1] - dy, cand[:, 2] - dx) * res > separation
-            runner_up = float(score[apart].max()) if apart.any() else 0.0
-            pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
-            return pose, float(score[best]), runner_up
-    raise AssertionError("unreachable")
+    # tie-break towards the prior (smallest offset) for determinism
+    dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
+    best = np.lexsort((dist, -score))[0]
+    a, dy, dx = cand[best]
+    apart = np.hypot(cand[:, 1] - dy, cand[:, 2] - dx) * res > separation
+    runner_up = float(score[apart].max()) if apart.any() else 0.0
+    pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+    return pose, float(score[best]), runner_up
+
+
+def _beam(
+    field: LikelihoodField,
+    rows0: np.ndarray,
+    cols0: np.ndarray,
+    thetas: np.ndarray,
+    prior: Pose2D,
+    window: SearchWindow,
+    na: int,
+    wc: int,
+    separation: float,
+) -> tuple[Pose2D, float, float]:
+    """The compiled coarse-to-fine beam: every block of the top level scored at once
+    (:func:`nav.slam.kernels.block_scores`), then a level at a time the ``beam`` best kept (numpy's
+    ``argpartition``, as the reference) and their children scored
+    (:func:`nav.slam.beam_search.score_children`); the best of the last level
+    (:func:`nav.slam.beam_search.best_candidate`)."""
+    top = window.levels
+    field.ensure_levels(top)
+    s = 1 << top
+    lo = math.floor(-wc / s)
+    nb = math.floor(wc / s) - lo + 1
+    top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points)
+    score = kernels.block_scores(field.pooled[top], field.phase(top), top_rows, top_cols, lo, nb, s).ravel()
+    cand = _top_candidates(len(thetas), lo, nb)  # (C, 3): `score`'s order
+    for level in range(top - 1, -1, -1):
+        if len(cand) > window.beam:
+            keep = np.argpartition(-score, window.beam)[: window.beam]
+            cand = cand[keep]
+        cand, score = score_children(field.pooled[level], rows0, cols0, cand, 1 << level, wc)
+    a, dy, dx, best, runner_up = best_candidate(cand, score, na, separation, field.resolution)
+    res = field.resolution
+    pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
+    return pose, best, runner_up
 
 
 def refine_pose(
@@ -508,12 +535,33 @@ def match_scan_with_fallback(
     of the 50 Intel relation pairs all did)."""
     coarse, coarse_score, pose, score = _search_and_refine(field, pts, prior, window, refine)
     if score < minimum_score:
-        seed = (coarse, coarse_score) if nested(window, wide_window) else None
-        wide_coarse, _ = correlative_search(field, pts, prior, wide_window, seed)
-        if wide_coarse != coarse:
-            wide_pose, wide_score = refine_pose(field, pts, wide_coarse, wide_coarse, refine)
-            if wide_score > score:
-                pose, score = wide_pose, wide_score
+        return wide_fallback(
+            field, pts, prior, window, wide_window, coarse, coarse_score, pose, score, refine
+        )
+    return pose, score
+
+
+def wide_fallback(
+    field: LikelihoodField,
+    pts: np.ndarray,
+    prior: Pose2D,
+    window: SearchWindow,
+    wide_window: SearchWindow,
+    coarse: Pose2D,
+    coarse_score: float,
+    pose: Pose2D,
+    score: float,
+    refine: RefineOptions = RefineOptions(),
+) -> tuple[Pose2D, float]:
+    """The second half of :func:`match_scan_with_fallback`: the search in ``wide_window`` of a
+    match in ``window`` (its search's pose and score ``coarse`` / ``coarse_score``, refined to
+    ``pose`` / ``score``) and the better of the two refined matches."""
+    seed = (coarse, coarse_score) if nested(window, wide_window) else None
+    wide_coarse, _ = correlative_search(field, pts, prior, wide_window, seed)
+    if wide_coarse != coarse:
+        wide_pose, wide_score = refine_pose(field, pts, wide_coarse, wide_coarse, refine)
+        if wide_score > score:
+            return wide_pose, wide_score
     return pose, score
 
 

@@ -1,0 +1,179 @@
+"""Scan-to-scan matching: one scan against one reference scan, from an odometry prior (what
+OpenKarto's ScanMatcher does for a pair of scans; ``navdeck bench peers`` compares the two).
+
+The SLAM front end's match on the reference's likelihood field: the field of the reference's
+returns (:meth:`nav.slam.field.LikelihoodField.from_points`), the current scan's points the
+reference did not observe left out (chosen at the prior, :mod:`nav.slam.coverage`, as the front end
+leaves out points its submap has not observed), the narrow exhaustive search and Gauss-Newton
+refinement, and below ``wide_search_minimum_score`` the wide re-search
+(:func:`nav.slam.matcher.match_scan_with_fallback`).
+
+Everything up to the refined narrow match is one compiled call (:func:`narrow_match`) of the same
+kernels the separate steps call, so the result is theirs bit for bit (the tests compare the two):
+as separate calls, their Python (a dozen small numpy operations, five dispatches, the field object)
+was ~15 % of a match.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from nav.slam import kernels
+from nav.slam.field import LikelihoodField, _halved_window_kernels, _window_kernel
+from nav.slam.matcher import RefineOptions, ScanMatchError, _angle_offsets, wide_fallback
+from nav.slam.system import SlamOptions
+from nav.types import LaserScan, Pose2D
+
+FIELD_MARGIN = 0.5
+"""Margin (m) of the reference's field around its returns (``LikelihoodField.from_points``')."""
+
+
+class ScanToScanMatcher:
+    """Matches scans against reference scans (:meth:`match`) as the SLAM front end matches a scan
+    against its submap: ``options``' resolution, likelihood field, windows, wide re-search threshold
+    and refinement weights; returns beyond ``range_limit`` (default ``max_laser_range``) observed
+    nothing, and a point within a cell of a return was observed."""
+
+    def __init__(self, options: SlamOptions | None = None, range_limit: float | None = None) -> None:
+        o = options or SlamOptions()
+        self.resolution, self.sigma = o.resolution, o.likelihood_sigma
+        self.range_limit = o.max_laser_range if range_limit is None else range_limit
+        self.window, self.wide_window = o.front_end_windows()
+        if self.window.levels != 0:
+            raise ValueError("a scan-to-scan match searches its narrow window exhaustively (search_levels 0)")
+        self.minimum_score = o.wide_search_minimum_score
+        self.refine = RefineOptions(
+            translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
+        )
+        self._na = math.ceil(self.window.angular_search_window / self.window.angular_step)
+        self._wc = math.ceil(self.window.linear_search_window / self.resolution)
+        self._kernel = _window_kernel(self.sigma, self.resolution, 0)
+        self._halved = _halved_window_kernels(self.sigma, self.resolution, self._wc)
+
+    def match(
+        self, reference: LaserScan, reference_points: np.ndarray, points: np.ndarray, prior: Pose2D
+    ) -> tuple[Pose2D, float]:
+        """The pose of ``points`` (N, 2, their scan's frame) in the frame of ``reference`` (whose
+        returns are ``reference_points``) and its score (mean field value, 0..1); ``prior``: the
+        odometry's guess of that pose."""
+        if reference_points.shape[0] == 0:
+            raise ValueError("no points to build a likelihood field from")
+        if points.shape[0] == 0:
+            raise ScanMatchError("no points to match")
+        w, r = self.window, self.refine
+        thetas = prior.theta + _angle_offsets(w.angular_step, self._na)
+        grid, ox, oy, rows, cols, bound, kept, c, best, x, score = narrow_match(
+            np.ascontiguousarray(reference_points, dtype=np.float64),
+            self.resolution,
+            FIELD_MARGIN,
+            self._kernel,
+            self._halved,
+            np.ascontiguousarray(reference.ranges, dtype=np.float64),
+            float(reference.range_min),
+            self.range_limit,
+            float(reference.angle_min),
+            float(reference.angle_increment),
+            np.ascontiguousarray(points, dtype=np.float64),
+            np.array([prior.x, prior.y, math.cos(prior.theta), math.sin(prior.theta)]),
+            w.max_points,
+            np.cos(thetas),  # numpy's, as the separate steps use
+            np.sin(thetas),
+            prior.x,
+            prior.y,
+            self._wc,
+            thetas,
+            r.occupied_space_weight,
+            r.translation_weight,
+            r.rotation_weight,
+            r.max_iterations,
+            r.tolerance,
+        )
+        pose = Pose2D(float(x[0]), float(x[1]), float(x[2]))
+        if score >= self.minimum_score:
+            return pose, score
+        f = LikelihoodField(grid, np.array([ox, oy]), self.resolution)
+        f.sigma = self.sigma
+        f._splatted = (rows, cols)
+        f._window_max[self._wc] = bound
+        coarse = Pose2D(float(c[0]), float(c[1]), float(c[2]))
+        return wide_fallback(f, kept, prior, w, self.wide_window, coarse, best, pose, score, r)
+
+
+@njit(cache=True, nogil=True)
+def _thinned(n: int, m: int) -> np.ndarray:
+    """``np.linspace(0, n - 1, m).astype(np.int64)`` (``matcher._thinned``), the same float64
+    operations: ``i * ((n - 1) / (m - 1))``, the last exactly ``n - 1``, truncated."""
+    out = np.empty(m, dtype=np.int64)
+    step = float(n - 1) / float(m - 1)
+    for i in range(m - 1):
+        out[i] = int(float(i) * step)
+    out[m - 1] = n - 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def narrow_match(
+    reference_points: np.ndarray,
+    resolution: float,
+    margin: float,
+    kernel: np.ndarray,
+    halved_kernels: np.ndarray,
+    ranges: np.ndarray,
+    range_min: float,
+    range_limit: float,
+    angle_min: float,
+    angle_increment: float,
+    points: np.ndarray,
+    prior_pose: np.ndarray,
+    max_points: int,
+    cos_t: np.ndarray,
+    sin_t: np.ndarray,
+    px: float,
+    py: float,
+    wc: int,
+    thetas: np.ndarray,
+    occupied_weight: float,
+    wt: float,
+    wr: float,
+    max_iterations: int,
+    tolerance: float,
+) -> tuple:
+    """The reference's field (``LikelihoodField.from_points``: grid, origin x and y, the returns'
+    cells), its search bound (``window_max(wc)``), the points the reference observed
+    (``coverage.observed_by_scan`` at ``prior_pose`` (x, y, cos, sin), ``coverage.observed_subset``),
+    then ``matcher._search_and_refine`` of those in the exhaustive window: the search's pose and
+    score, the refined pose and its score."""
+    grid, ox, oy, rows, cols = kernels.points_field(reference_points, resolution, margin, kernel)
+    h, w = grid.shape
+    bound = np.zeros(((h + 2 * wc + 1) // 2, (w + 2 * wc + 1) // 2), dtype=np.float32)
+    kernels.splat_halved(bound, rows + wc, cols + wc, halved_kernels)
+    observed = kernels.observed_by_scan(
+        ranges, range_min, range_limit, angle_min, angle_increment, points, prior_pose, resolution
+    )
+    n = points.shape[0]
+    kept = 0
+    for i in range(n):
+        kept += observed[i]
+    if 3 <= kept < n:  # too few observed: all are matched
+        pts = np.empty((kept, 2))
+        k = 0
+        for i in range(n):
+            if observed[i]:
+                pts[k] = points[i]
+                k += 1
+    else:
+        pts = points
+    search = pts
+    if pts.shape[0] > max_points:
+        idx = _thinned(pts.shape[0], max_points)
+        search = np.empty((max_points, 2))
+        for i in range(max_points):
+            search[i] = pts[idx[i]]
+    coarse, best, x, score = kernels.exhaustive_match(
+        grid, bound, search, cos_t, sin_t, px, py, ox, oy, resolution, wc, thetas, pts,
+        occupied_weight, wt, wr, max_iterations, tolerance,
+    )  # fmt: skip
+    return grid, ox, oy, rows, cols, bound, pts, coarse, best, x, score
