@@ -412,11 +412,46 @@ def _splat_one(field: np.ndarray, r: int, c: int, kernel: np.ndarray) -> None:
             field[r0 + j, c0 + k] = kv if kv > v else v
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _splat_rows8(field: np.ndarray, r: int, c: int, kernel8: np.ndarray, size: int) -> None:
+    """:func:`_splat_one` of a ``size`` x ``size`` kernel (``size`` <= 8) given zero-padded to 8
+    columns (``kernel8``): away from the grid's right edge every row is one 8-wide max (a max with
+    the padding's 0 leaves a field value, >= 0, as it was), instead of ``size`` scalar ones."""
+    h, w = field.shape
+    rad = size // 2
+    r0, c0 = r - rad, c - rad
+    if r0 >= 0 and c0 >= 0 and r0 + size <= h and c0 + 8 <= w:
+        for j in range(size):
+            for k in range(8):
+                v, kv = field[r0 + j, c0 + k], kernel8[j, k]
+                field[r0 + j, c0 + k] = kv if kv > v else v
+        return
+    for j in range(max(-r0, 0), min(h - r0, size)):
+        for k in range(max(-c0, 0), min(w - c0, size)):
+            v, kv = field[r0 + j, c0 + k], kernel8[j, k]
+            field[r0 + j, c0 + k] = kv if kv > v else v
+
+
+@njit(cache=True, nogil=True)
+def _pad8(kernel: np.ndarray) -> np.ndarray:
+    """A square kernel of <= 8 columns, zero-padded to 8 (:func:`_splat_rows8`)."""
+    out = np.zeros((kernel.shape[0], 8), dtype=kernel.dtype)
+    out[:, : kernel.shape[1]] = kernel
+    return out
+
+
 @njit(cache=True, nogil=True)
 def splat_dense(field: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernel: np.ndarray) -> None:
     """The maxima of a dense square ``kernel`` ((2 R + 1)^2 weights centred on the cell), row
     by row: ``field[r + dy, c + dx] = max(field, kernel[dy + R, dx + R])``, in place, the part
-    outside the grid skipped. Contiguous rows vectorize (~2x faster than a list of offsets)."""
+    outside the grid skipped. Contiguous rows vectorize (~2x faster than a list of offsets); a
+    kernel of <= 8 columns (the field's 7 x 7) as 8-wide rows (~30 % less time)."""
+    size = kernel.shape[0]
+    if size <= 8:
+        k8 = _pad8(kernel)
+        for i in range(rows.shape[0]):
+            _splat_rows8(field, rows[i], cols[i], k8, size)
+        return
     for i in range(rows.shape[0]):
         _splat_one(field, rows[i], cols[i], kernel)
 
@@ -426,6 +461,16 @@ def splat_halved(bound: np.ndarray, rows: np.ndarray, cols: np.ndarray, kernels:
     """:func:`splat_dense` on a half-resolution grid: the kernel splatted at full-resolution cell
     (r, c) lands on half-resolution cell (r >> 1, c >> 1) as ``kernels[r & 1, c & 1]`` (each
     parity's 2 x 2 maxima of the full-resolution kernel, ``field._halved_window_kernels``)."""
+    size = kernels.shape[2]
+    if size <= 8:
+        k8 = np.zeros((2, 2, size, 8), dtype=kernels.dtype)
+        for pr in range(2):
+            for pc in range(2):
+                k8[pr, pc] = _pad8(kernels[pr, pc])
+        for i in range(rows.shape[0]):
+            r, c = rows[i], cols[i]
+            _splat_rows8(bound, r >> 1, c >> 1, k8[r & 1, c & 1], size)
+        return
     for i in range(rows.shape[0]):
         r, c = rows[i], cols[i]
         _splat_one(bound, r >> 1, c >> 1, kernels[r & 1, c & 1])
