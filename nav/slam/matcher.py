@@ -240,7 +240,7 @@ def _correlative(
         pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
         return pose, best, 0.0
     if compiled:
-        return _beam(field, rows0, cols0, thetas, prior, window, na, wc, separation)
+        return _beam(field, cell_args, rows0, cols0, thetas, prior, window, na, wc, separation)
     # numpy: the beam, or with ``exact`` the exhaustive search (branch-and-bound's reference)
     top = 0 if exact else window.levels
     field.ensure_levels(top)
@@ -274,6 +274,7 @@ def _correlative(
 
 def _beam(
     field: LikelihoodField,
+    cell_args: tuple,
     rows0: np.ndarray,
     cols0: np.ndarray,
     thetas: np.ndarray,
@@ -287,13 +288,21 @@ def _beam(
     (:func:`nav.slam.kernels.block_scores`), then a level at a time the ``beam`` best kept (numpy's
     ``argpartition``, as the reference) and their children scored
     (:func:`nav.slam.beam_search.score_children`); the best of the last level
-    (:func:`nav.slam.beam_search.best_candidate`)."""
+    (:func:`nav.slam.beam_search.best_candidate`). ``cell_args``: :func:`_cell_args` of the
+    search's points (the top level's thinned ones are rotated on their own, the same cells as
+    ``rows0`` / ``cols0``'s columns, ~5x cheaper than gathering those)."""
     top = window.levels
     field.ensure_levels(top)
     s = 1 << top
     lo = math.floor(-wc / s)
     nb = math.floor(wc / s) - lo + 1
-    top_rows, top_cols = _top_level_points(rows0, cols0, window.top_level_points)
+    pts = cell_args[0]
+    limit = window.top_level_points
+    if limit is None or pts.shape[0] <= limit:
+        top_rows, top_cols = rows0, cols0
+    else:
+        top_pts = np.take(pts, _thinned(pts.shape[0], limit), axis=0)
+        top_rows, top_cols = kernels.rotated_cells(top_pts, *cell_args[1:])
     score = kernels.block_scores(field.pooled[top], field.phase(top), top_rows, top_cols, lo, nb, s).ravel()
     cand = _top_candidates(len(thetas), lo, nb)  # (C, 3): `score`'s order
     for level in range(top - 1, -1, -1):

@@ -65,7 +65,7 @@ class ScanToScanMatcher:
             raise ScanMatchError("no points to match")
         w, r = self.window, self.refine
         thetas = prior.theta + _angle_offsets(w.angular_step, self._na)
-        grid, ox, oy, rows, cols, bound, kept, c, best, x, score = narrow_match(
+        grid, ox, oy, kept, cx, cy, ct, best, x, y, theta, score = narrow_match(
             np.ascontiguousarray(reference_points, dtype=np.float64),
             self.resolution,
             FIELD_MARGIN,
@@ -91,15 +91,12 @@ class ScanToScanMatcher:
             r.max_iterations,
             r.tolerance,
         )
-        pose = Pose2D(float(x[0]), float(x[1]), float(x[2]))
+        pose = Pose2D(x, y, theta)
         if score >= self.minimum_score:
             return pose, score
         f = LikelihoodField(grid, np.array([ox, oy]), self.resolution)
         f.sigma = self.sigma
-        f._splatted = (rows, cols)
-        f._window_max[self._wc] = bound
-        coarse = Pose2D(float(c[0]), float(c[1]), float(c[2]))
-        return wide_fallback(f, kept, prior, w, self.wide_window, coarse, best, pose, score, r)
+        return wide_fallback(f, kept, prior, w, self.wide_window, Pose2D(cx, cy, ct), best, pose, score, r)
 
 
 @njit(cache=True, nogil=True)
@@ -141,11 +138,12 @@ def narrow_match(
     max_iterations: int,
     tolerance: float,
 ) -> tuple:
-    """The reference's field (``LikelihoodField.from_points``: grid, origin x and y, the returns'
-    cells), its search bound (``window_max(wc)``), the points the reference observed
-    (``coverage.observed_by_scan`` at ``prior_pose`` (x, y, cos, sin), ``coverage.observed_subset``),
-    then ``matcher._search_and_refine`` of those in the exhaustive window: the search's pose and
-    score, the refined pose and its score."""
+    """The reference's field (``LikelihoodField.from_points``: grid, origin x and y), the points
+    the reference observed (``coverage.observed_by_scan`` at ``prior_pose`` (x, y, cos, sin), then
+    ``coverage.observed_subset``), then ``matcher._search_and_refine`` of those in the exhaustive
+    window, bounded by the field's ``window_max(wc)``: the search's pose (x, y, theta) and score,
+    the refined pose and its score. Two arrays come back, not more: each one handed to Python is
+    ~1 us of boxing."""
     grid, ox, oy, rows, cols = kernels.points_field(reference_points, resolution, margin, kernel)
     h, w = grid.shape
     bound = np.zeros(((h + 2 * wc + 1) // 2, (w + 2 * wc + 1) // 2), dtype=np.float32)
@@ -176,4 +174,4 @@ def narrow_match(
         grid, bound, search, cos_t, sin_t, px, py, ox, oy, resolution, wc, thetas, pts,
         occupied_weight, wt, wr, max_iterations, tolerance,
     )  # fmt: skip
-    return grid, ox, oy, rows, cols, bound, pts, coarse, best, x, score
+    return grid, ox, oy, pts, coarse[0], coarse[1], coarse[2], best, x[0], x[1], x[2], score
