@@ -170,25 +170,6 @@ def _add_block(g: np.ndarray, r0: int, c0: int, side: int, stride: int, acc: np.
                     acc[j, k] += g[r, c]
 
 
-@njit(cache=True, nogil=True, inline="always")
-def _add_blocks_rows8(
-    grid: np.ndarray, r0s: np.ndarray, c0s: np.ndarray, side: int, n8: int, part: np.ndarray
-) -> None:
-    """:func:`_block_sums`' accumulation of points ``0 .. n8 - 1`` (point i into ``part[i % 8]``)
-    over adjacent cells of ``grid`` when ``part`` is (8, side, 8), side <= 8: each block row one
-    8-wide add (the columns past ``side`` are summed and never read; ~10 % of the front end's
-    exhaustive search)."""
-    h, w = grid.shape
-    for i in range(n8):
-        r, c, p = r0s[i], c0s[i], i & 7
-        if r >= 0 and c >= 0 and r + side <= h and c + 8 <= w:
-            for j in range(side):
-                for k in range(8):
-                    part[p, j, k] += grid[r + j, c + k]
-        else:
-            _add_block(grid, r, c, side, 1, part[p])
-
-
 @njit(cache=True, nogil=True)
 def _block_sums(
     grid: np.ndarray,
@@ -226,15 +207,12 @@ def _block_sums(
         return
     n8 = n - n % 8 if n >= 8 else 0
     part[:] = zero
-    if step == 1 and phase.shape[0] == 1 and side <= 8 and part.shape[2] == 8:
-        _add_blocks_rows8(grid, r0s, c0s, side, n8, part)
-    else:
-        for i in range(n8):
-            if phase.shape[0] == 1:  # not split: cells ``step`` apart in the grid itself
-                _add_block(grid, r0s[i], c0s[i], side, step, part[i % 8])
-            else:
-                g = phase[r0s[i] & mask, c0s[i] & mask]
-                _add_block(g, r0s[i] >> shift, c0s[i] >> shift, side, 1, part[i % 8])
+    for i in range(n8):
+        if phase.shape[0] == 1:  # not split: cells ``step`` apart in the grid itself
+            _add_block(grid, r0s[i], c0s[i], side, step, part[i % 8])
+        else:
+            g = phase[r0s[i] & mask, c0s[i] & mask]
+            _add_block(g, r0s[i] >> shift, c0s[i] >> shift, side, 1, part[i % 8])
     for j in range(side):
         for k in range(side):
             if n8 > 0:
@@ -532,7 +510,7 @@ def exhaustive_search(
     runner = separation < math.inf
     phase = phase_split(grid, 1)
     scores = np.empty((na if runner else 1, side, side), dtype=np.float32)
-    part = np.empty((8, side, max(side, 8)), dtype=np.float32)  # 8 wide: _add_blocks_rows8
+    part = np.empty((8, side, side), dtype=np.float32)
     sums = np.empty((side, side), dtype=np.float32)
     nf = np.float32(n)
     centre = (na - 1) // 2
