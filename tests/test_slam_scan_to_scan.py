@@ -62,7 +62,7 @@ def test_one_call_equals_the_separate_steps_on_the_box_world() -> None:
 
 
 def test_thinning_equals_numpys_linspace() -> None:
-    for n, k in ((101, 100), (180, 100), (361, 100), (1000, 7), (5, 2)):
+    for n, k in ((101, 100), (180, 100), (361, 100), (1000, 7), (5, 2), (40, 1)):
         assert np.array_equal(_thinned(n, k), np.linspace(0, n - 1, k).astype(np.int64))
 
 

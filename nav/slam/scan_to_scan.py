@@ -103,7 +103,9 @@ class ScanToScanMatcher:
 def _thinned(n: int, m: int) -> np.ndarray:
     """``np.linspace(0, n - 1, m).astype(np.int64)`` (``matcher._thinned``), the same float64
     operations: ``i * ((n - 1) / (m - 1))``, the last exactly ``n - 1``, truncated."""
-    out = np.empty(m, dtype=np.int64)
+    out = np.zeros(m, dtype=np.int64)
+    if m == 1:  # linspace's single sample is its start
+        return out
     step = float(n - 1) / float(m - 1)
     for i in range(m - 1):
         out[i] = int(float(i) * step)
