@@ -18,6 +18,9 @@ import numpy as np
 from nav.grid import LogOddsGrid
 from nav.slam import kernels
 
+POINTS_FIELD_MARGIN = 0.5
+"""Margin (m) of a field built from points (:meth:`LikelihoodField.from_points`) around them."""
+
 
 @functools.lru_cache(maxsize=16)
 def _kernel(sigma: float, resolution: float) -> np.ndarray:
@@ -130,7 +133,12 @@ class LikelihoodField:
 
     @classmethod
     def from_points(
-        cls, points: np.ndarray, resolution: float, sigma: float = 0.05, margin: float = 0.5, levels: int = 0
+        cls,
+        points: np.ndarray,
+        resolution: float,
+        sigma: float = 0.05,
+        margin: float = POINTS_FIELD_MARGIN,
+        levels: int = 0,
     ) -> LikelihoodField:
         """Field of the cells hit by (N, 2) ``points`` (scan-to-scan matching: the reference
         scan's returns in its own frame), on a grid covering them plus ``margin`` (m); no free
@@ -151,7 +159,7 @@ class LikelihoodField:
 
     @classmethod
     def from_points_reference(
-        cls, points: np.ndarray, resolution: float, sigma: float = 0.05, margin: float = 0.5
+        cls, points: np.ndarray, resolution: float, sigma: float = 0.05, margin: float = POINTS_FIELD_MARGIN
     ) -> LikelihoodField:
         """Pure-numpy reference of :meth:`from_points` (the tests compare the two)."""
         if points.shape[0] == 0:

@@ -22,13 +22,10 @@ import numpy as np
 from numba import njit
 
 from nav.slam import kernels
-from nav.slam.field import LikelihoodField, _halved_window_kernels, _window_kernel
-from nav.slam.matcher import RefineOptions, ScanMatchError, _angle_offsets, wide_fallback
+from nav.slam.field import POINTS_FIELD_MARGIN, LikelihoodField, _halved_window_kernels, _window_kernel
+from nav.slam.matcher import ScanMatchError, _angle_offsets, wide_fallback
 from nav.slam.system import SlamOptions
 from nav.types import LaserScan, Pose2D
-
-FIELD_MARGIN = 0.5
-"""Margin (m) of the reference's field around its returns (``LikelihoodField.from_points``')."""
 
 
 class ScanToScanMatcher:
@@ -45,9 +42,7 @@ class ScanToScanMatcher:
         if self.window.levels != 0:
             raise ValueError("a scan-to-scan match searches its narrow window exhaustively (search_levels 0)")
         self.minimum_score = o.wide_search_minimum_score
-        self.refine = RefineOptions(
-            translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
-        )
+        self.refine = o.refine_options()
         self._na = math.ceil(self.window.angular_search_window / self.window.angular_step)
         self._wc = math.ceil(self.window.linear_search_window / self.resolution)
         self._kernel = _window_kernel(self.sigma, self.resolution, 0)
@@ -68,7 +63,7 @@ class ScanToScanMatcher:
         grid, ox, oy, kept, cx, cy, ct, best, x, y, theta, score = narrow_match(
             np.ascontiguousarray(reference_points, dtype=np.float64),
             self.resolution,
-            FIELD_MARGIN,
+            POINTS_FIELD_MARGIN,
             self._kernel,
             self._halved,
             np.ascontiguousarray(reference.ranges, dtype=np.float64),

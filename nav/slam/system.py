@@ -317,6 +317,10 @@ class SlamOptions:
         )
         return narrow, wide
 
+    def refine_options(self) -> RefineOptions:
+        """The front end's (and loop closure's) Gauss-Newton refinement."""
+        return RefineOptions(translation_weight=self.translation_weight, rotation_weight=self.rotation_weight)
+
 
 @dataclass
 class _Node:
@@ -441,9 +445,7 @@ class GraphSlam:
             o.loop_search_levels,
             64,
         )
-        self._refine = RefineOptions(
-            translation_weight=o.translation_weight, rotation_weight=o.rotation_weight
-        )
+        self._refine = o.refine_options()
         self._nodes: list[_Node] = []
         self._global: list[np.ndarray] = []  # map pose per node
         self._submaps: list[Submap] = []
