@@ -11,7 +11,7 @@ from slam_worlds import box_world_grid, plateau_field
 from bench import peers
 from nav.grid import VIEW_CLEARED, VIEW_HIT, VIEW_UNSURE, LogOddsGrid, LogOddsOptions
 from nav.slam import kernels
-from nav.slam.beam_search import best_candidate, score_children
+from nav.slam.beam_search import best_candidate, keep_best, keep_best_reference, score_children
 from nav.slam.field import LikelihoodField, _halved_window_kernels, _window_kernel, field_reference, halve_max
 from nav.slam.matcher import (
     RefineOptions,
@@ -231,6 +231,35 @@ def test_compiled_children_and_scores_equal_numpys(level: int, wc: int, n: int) 
     assert np.array_equal(scores, ref)  # bit for bit
 
 
+@pytest.mark.parametrize(("n", "beam"), [(4356, 48), (192, 48), (48, 48), (30, 48), (1000, 1), (500, 64)])
+def test_compiled_beam_keeps_the_best_ties_to_the_earlier(n: int, beam: int) -> None:
+    rng = np.random.default_rng(n + beam)
+    for values in (rng.random(n), rng.choice([0.25, 0.5, 0.75, 0.8], n), np.sort(rng.random(n))):
+        score = values.astype(np.float32)  # ties at the beam's edge in the second
+        assert np.array_equal(keep_best(score, beam), keep_best_reference(score, beam))
+    score = np.full(n, 0.5, dtype=np.float32)  # all equal: the first ``beam``
+    assert np.array_equal(keep_best(score, beam), np.arange(min(n, beam)))
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_pooled_levels_of_a_points_field_are_splats_of_the_pooled_kernel(seed: int) -> None:
+    # points_pooled / points_phase build a scan field's pooled levels and their phases from the
+    # scan's cells, exactly what max-pooling the field and splitting it give
+    rng = np.random.default_rng(seed)
+    pts = rng.uniform(-6, 6, (150, 2))
+    pts[:30, 1] = 2.0  # a wall: overlapping splats
+    field = LikelihoodField.from_points(pts, 0.05, sigma=0.05, levels=4)
+    kernel = _window_kernel(0.05, 0.05, 0)
+    rows, cols = kernels.points_cells(pts, float(field.origin[0]), float(field.origin[1]), 0.05)
+    h, w = field.field.shape
+    assert kernels.points_fit(rows, cols, kernel.shape[0] // 2, h, w)
+    for level in range(1, 5):
+        step = 1 << level
+        assert np.array_equal(kernels.points_pooled(rows, cols, kernel, step, h, w), field.pooled[level])
+        assert np.array_equal(kernels.points_phase(rows, cols, kernel, step, h, w), field.phase(level))
+    assert not kernels.points_fit(rows, cols, 11, h, w)  # a kernel wider than the margin is clipped
+
+
 def test_compiled_best_candidate_breaks_ties_as_numpys_lexsort() -> None:
     rng = np.random.default_rng(3)
     cand = np.column_stack(
@@ -267,7 +296,7 @@ def test_compiled_top_level_scores_equal_the_reference(size: int) -> None:
     field = LikelihoodField(rng.random((size, size)).astype(np.float32), np.zeros(2), 0.05, levels=2)
     rows0 = rng.integers(-8, size + 8, (3, 100))
     cols0 = rng.integers(-8, size + 8, (3, 100))
-    fast = kernels.block_scores(field.pooled[2], field.phase(2), rows0, cols0, -3, 6, 4)
+    fast = kernels.block_scores(field.phase(2), rows0, cols0, -3, 6, 4)
     a_idx, by, bx = np.meshgrid(np.arange(3), np.arange(-3, 3), np.arange(-3, 3), indexing="ij")
     cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
     ref = score_candidates_reference(field, 2, rows0, cols0, cand, 4)

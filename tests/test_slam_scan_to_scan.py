@@ -10,11 +10,13 @@ import numpy as np
 import pytest
 
 from bench import peers
+from nav.slam import scan_to_scan
 from nav.slam.coverage import observed_by_scan, observed_subset
-from nav.slam.field import LikelihoodField
+from nav.slam.field import LikelihoodField, _window_kernel
 from nav.slam.matcher import ScanMatchError, match_scan_with_fallback
 from nav.slam.scan_to_scan import ScanToScanMatcher, _thinned
 from nav.slam.synthetic import box_world, cast_scan
+from nav.slam.system import SlamOptions
 from nav.types import LaserScan, Pose2D
 
 
@@ -59,6 +61,37 @@ def test_one_call_equals_the_separate_steps_on_the_box_world() -> None:
         got = m.match(ref, ref_pts, pts, prior)
         assert got == separate_steps(m, ref, ref_pts, pts, prior)
         assert got[0].distance_to(truth) < 0.03
+
+
+@pytest.mark.parametrize("sigma", [0.05, 0.2])
+def test_the_wide_re_search_in_one_call_equals_the_separate_steps(
+    sigma: float, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # an odometry prior 0.3 m and 0.25 rad off: beyond the narrow window. With sigma 0.2 the
+    # field's kernel is wider than its margin, and the pooled levels come from max-pooling the field
+    # rather than from splats of the scan's cells
+    grid, res = box_world()
+    rng = np.random.default_rng(9)
+    # (a blurred field scores a poor match high: the threshold makes every match search again)
+    m = ScanToScanMatcher(SlamOptions(likelihood_sigma=sigma, wide_search_minimum_score=0.99))
+    radius = _window_kernel(sigma, res, 0).shape[0] // 2
+    assert (radius > 10) == (sigma > 0.1)  # 0.2: wider than the 0.5 m margin (10 cells)
+    calls = []
+    one_call = scan_to_scan.wide_match
+    monkeypatch.setattr(scan_to_scan, "wide_match", lambda *a: calls.append(a) or one_call(*a))
+    for _ in range(3):
+        a = Pose2D(*rng.uniform([2.0, 1.5, -3.0], [4.0, 2.5, 3.0]))
+        b = a.compose(Pose2D(*rng.uniform([-0.2, -0.2, -0.2], [0.2, 0.2, 0.2])))
+        ref = cast_scan(grid, res, a, 360, fov=2 * math.pi, noise=0.01, rng=rng)
+        cur = cast_scan(grid, res, b, 360, fov=2 * math.pi, noise=0.01, rng=rng)
+        truth = b.relative_to(a)
+        prior = Pose2D(truth.x + 0.3, truth.y - 0.2, truth.theta + 0.25)
+        ref_pts, pts = peers._scan_points(ref), peers._scan_points(cur)
+        got = m.match(ref, ref_pts, pts, prior)
+        assert got == separate_steps(m, ref, ref_pts, pts, prior)
+        if sigma < 0.1:
+            assert got[0].distance_to(truth) < 0.05  # found by the wide re-search
+    assert calls  # the wide re-search ran
 
 
 def test_thinning_equals_numpys_linspace() -> None:

@@ -1,15 +1,19 @@
-"""The coarse-to-fine beam search's levels below the top, compiled (the wide re-search, loop
-closure and the global search: :func:`nav.slam.matcher.correlative_search` with ``levels > 0``).
+"""The coarse-to-fine beam search, compiled (the wide re-search, loop closure and the global
+search: :func:`nav.slam.matcher.correlative_search` with ``levels > 0``), in one call
+(:func:`beam_search`).
 
-A level keeps its ``beam`` best candidates (numpy's ``argpartition``, called between these kernels
-so the kept candidates and their order are what the numpy reference keeps, ties included), splits
-each into its 4 children and scores them; the last level picks the best. Scoring a parent's 4
-children is one pass over the points (:func:`nav.slam.kernels._block_sums` reads each point's 2 x 2
-cells in place): the same float32 sums, bit for bit, as scoring each child on its own
-(:func:`nav.slam.kernels.score_candidates`), without gathering each child's values first. On the
-7 Intel relation pairs of ``navdeck bench peers`` that fall back to the wide re-search, a whole
-match took ~0.88 of its time with these levels and their split, scores and pick in numpy (same
-poses, same-process A/B).
+The top level's blocks are all scored (:func:`nav.slam.kernels.block_scores`); then a level at a
+time the ``beam`` best candidates are kept (:func:`keep_best`: ties to the earlier candidate, kept in
+candidate order), each is split into its 4 children and they are scored; the last level picks the
+best (:func:`best_candidate`). Scoring a parent's 4 children is one pass over the points
+(:func:`nav.slam.kernels._block_sums` reads each point's 2 x 2 cells in place): the same float32
+sums, bit for bit, as scoring each child on its own (:func:`nav.slam.kernels.score_candidates`).
+
+The beam was numpy's ``argpartition`` until stop 39, called from Python between the kernels: which
+of several equal scores at the beam's edge it keeps, and in which order, is its algorithm's (and
+numpy picks a SIMD one by CPU), so it could not move into a kernel. Keeping the earlier candidate
+is a rule both sides follow. The Python between the levels was ~100 us of a ~520 us wide re-search
+on the Intel relation pairs of ``navdeck bench peers``.
 """
 
 from __future__ import annotations
@@ -19,7 +23,69 @@ import math
 import numpy as np
 from numba import njit
 
-from nav.slam.kernels import _block_sums
+from nav.slam.kernels import _block_sums, block_scores
+
+
+@njit(cache=True, nogil=True)
+def keep_best(score: np.ndarray, beam: int) -> np.ndarray:
+    """Indices of the ``beam`` highest ``score`` (all when there are no more), ties to the lower
+    index, in ascending order: :func:`keep_best_reference`'s."""
+    n = score.shape[0]
+    if n <= beam:
+        return np.arange(n)
+    t = _kth_highest(score, beam)
+    ties = beam
+    for i in range(n):
+        if score[i] > t:
+            ties -= 1
+    out = np.empty(beam, dtype=np.int64)
+    m = 0
+    for i in range(n):
+        v = score[i]
+        if v > t or (v == t and ties > 0):
+            if v == t:
+                ties -= 1
+            out[m] = i
+            m += 1
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _kth_highest(score: np.ndarray, k: int) -> np.float32:
+    """The ``k``-th highest of ``score`` (counting equal values), 1 <= k <= its length: a min-heap
+    of the ``k`` highest so far, one comparison per value once it is full (numba's ``np.partition``
+    took ~10x as long on a top level's 4356 scores)."""
+    heap = score[:k].copy()
+    for i in range(k // 2 - 1, -1, -1):
+        _sift_down(heap, i)
+    for i in range(k, score.shape[0]):
+        if score[i] > heap[0]:
+            heap[0] = score[i]
+            _sift_down(heap, 0)
+    return heap[0]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _sift_down(heap: np.ndarray, i: int) -> None:
+    """Restore the min-heap order below ``heap[i]``."""
+    n = heap.shape[0]
+    v = heap[i]
+    while True:
+        c = 2 * i + 1
+        if c >= n:
+            break
+        if c + 1 < n and heap[c + 1] < heap[c]:
+            c += 1
+        if heap[c] >= v:
+            break
+        heap[i] = heap[c]
+        i = c
+    heap[i] = v
+
+
+def keep_best_reference(score: np.ndarray, beam: int) -> np.ndarray:
+    """numpy reference of :func:`keep_best` (a stable sort: equal scores keep their order)."""
+    return np.sort(np.argsort(-score, kind="stable")[:beam])
 
 
 @njit(cache=True, nogil=True)
@@ -38,6 +104,7 @@ def score_children(
     scores = np.empty(4 * parents.shape[0], dtype=np.float32)
     in_place = np.zeros((1, 1, 1, 1), dtype=np.float32)  # read the grid itself, ``step`` apart
     part = np.empty((8, 2, 2), dtype=np.float32)
+    part4 = np.empty(32, dtype=np.float32)
     sums = np.empty((2, 2), dtype=np.float32)
     r0s = np.empty(n, dtype=np.int64)
     c0s = np.empty(n, dtype=np.int64)
@@ -45,10 +112,13 @@ def score_children(
     for k in range(parents.shape[0]):
         a, by, bx = parents[k, 0], parents[k, 1], parents[k, 2]
         dy, dx = 2 * by * step, 2 * bx * step
-        for i in range(n):
-            r0s[i] = rows0[a, i] + dy
-            c0s[i] = cols0[a, i] + dx
-        _block_sums(grid, in_place, step, r0s, c0s, 2, part, sums)
+        if n <= 128:
+            _children_sums(grid, rows0[a], cols0[a], dy, dx, step, part4, sums)
+        else:
+            for i in range(n):
+                r0s[i] = rows0[a, i] + dy
+                c0s[i] = cols0[a, i] + dx
+            _block_sums(grid, in_place, step, r0s, c0s, 2, part, sums)
         for q in range(4):
             cy, cx = 2 * by + q // 2, 2 * bx + q % 2
             lo_y, lo_x = cy * step, cx * step
@@ -57,6 +127,54 @@ def score_children(
                 scores[m] = sums[q // 2, q % 2] / nf
                 m += 1
     return kids[:m], scores[:m]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _children_sums(
+    grid: np.ndarray,
+    rows: np.ndarray,
+    cols: np.ndarray,
+    dy: int,
+    dx: int,
+    step: int,
+    part: np.ndarray,
+    out: np.ndarray,
+) -> None:
+    """:func:`nav.slam.kernels._block_sums` of a 2 x 2 block of cells ``step`` apart at each
+    point's cell moved by (``dy``, ``dx``), for <= 128 points (in place on the grid), written out:
+    the four cells of a point go to its partial sums (``part``, 8 x 4) in four adds (the general
+    loop over a block's rows and columns cost ~2x as much at this size). The same additions in the
+    same order, so the same bits."""
+    h, w = grid.shape
+    n = rows.shape[0]
+    n8 = n - n % 8 if n >= 8 else 0
+    zero = np.float32(0.0)
+    part[:] = zero
+    for i in range(n8):
+        r, c = rows[i] + dy, cols[i] + dx
+        b = (i & 7) * 4
+        if r >= 0 and c >= 0 and r + step < h and c + step < w:
+            part[b] += grid[r, c]
+            part[b + 1] += grid[r, c + step]
+            part[b + 2] += grid[r + step, c]
+            part[b + 3] += grid[r + step, c + step]
+        else:
+            for q in range(4):
+                rr, cc = r + (q >> 1) * step, c + (q & 1) * step
+                if 0 <= rr < h and 0 <= cc < w:
+                    part[b + q] += grid[rr, cc]
+    for q in range(4):
+        if n8 > 0:
+            res = ((part[q] + part[4 + q]) + (part[8 + q] + part[12 + q])) + (
+                (part[16 + q] + part[20 + q]) + (part[24 + q] + part[28 + q])
+            )
+        else:
+            res = zero
+        for i in range(n8, n):
+            rr, cc = rows[i] + dy + (q >> 1) * step, cols[i] + dx + (q & 1) * step
+            if 0 <= rr < h and 0 <= cc < w:
+                res += grid[rr, cc]
+        out[q >> 1, q & 1] = res
 
 
 @njit(cache=True, nogil=True)
@@ -82,3 +200,49 @@ def best_candidate(
                 runner_up = scores[k]
             found = True
     return cand[best, 0], by, bx, float(scores[best]), float(runner_up)
+
+
+@njit(cache=True, nogil=True)
+def top_candidates(angles: int, lo: int, nb: int) -> np.ndarray:
+    """Every ``(angle index, by, bx)`` of a coarse-to-fine search's top level, blocks ``lo`` ..
+    ``lo + nb - 1``, in :func:`nav.slam.kernels.block_scores`' order."""
+    cand = np.empty((angles * nb * nb, 3), dtype=np.int64)
+    m = 0
+    for a in range(angles):
+        for j in range(nb):
+            for k in range(nb):
+                cand[m, 0], cand[m, 1], cand[m, 2] = a, lo + j, lo + k
+                m += 1
+    return cand
+
+
+@njit(cache=True, nogil=True)
+def beam_search(
+    levels: tuple | list,  # the pooled grids below the top: a tuple, or a numba typed List
+    top_phase: np.ndarray,
+    rows0: np.ndarray,
+    cols0: np.ndarray,
+    top_rows: np.ndarray,
+    top_cols: np.ndarray,
+    wc: int,
+    beam: int,
+    centre: int,
+    separation: float,
+    resolution: float,
+) -> tuple[int, int, int, float, float]:
+    """The whole beam search of the +-``wc`` cell window: ``levels[l]`` is ``pooled[l]`` for the
+    levels below the top (``levels[0]`` the field), ``top_phase`` the top level's
+    :func:`nav.slam.kernels.phase_split`; ``rows0`` / ``cols0`` (A, N) the points' cells at each
+    angle and zero offset, ``top_rows`` / ``top_cols`` those of the points the top level ranks its
+    blocks by. Returns :func:`best_candidate` of the last level (``centre``: the prior's angle
+    index)."""
+    top = len(levels)
+    s = 1 << top
+    lo = -((wc + s - 1) // s)  # floor(-wc / s)
+    nb = wc // s - lo + 1
+    score = block_scores(top_phase, top_rows, top_cols, lo, nb, s).ravel()
+    cand = top_candidates(top_rows.shape[0], lo, nb)
+    for level in range(top - 1, -1, -1):
+        keep = keep_best(score, beam)
+        cand, score = score_children(levels[level], rows0, cols0, cand[keep], 1 << level, wc)
+    return best_candidate(cand, score, centre, separation, resolution)

@@ -170,6 +170,19 @@ def _add_block(g: np.ndarray, r0: int, c0: int, side: int, stride: int, acc: np.
                     acc[j, k] += g[r, c]
 
 
+@njit(cache=True, nogil=True, inline="always")
+def _cell_value(grid: np.ndarray, phase: np.ndarray, shift: int, mask: int, r: int, c: int) -> np.float32:
+    """``grid[r, c]``, 0 outside; read from ``phase`` (:func:`phase_split` of the grid at ``1 <<
+    shift``, zero past the grid's edge, so bounded by the phases' extent) when it is split."""
+    if phase.shape[0] == 1:
+        h, w = grid.shape
+        return grid[r, c] if 0 <= r < h and 0 <= c < w else np.float32(0.0)
+    rr, cc = r >> shift, c >> shift  # floor division: a negative cell falls outside
+    if 0 <= rr < phase.shape[2] and 0 <= cc < phase.shape[3]:
+        return phase[r & mask, c & mask, rr, cc]
+    return np.float32(0.0)
+
+
 @njit(cache=True, nogil=True)
 def _block_sums(
     grid: np.ndarray,
@@ -182,17 +195,17 @@ def _block_sums(
     out: np.ndarray,
 ) -> None:
     """``out[j, k]`` = float32 sum over the points i of ``grid[r0s[i] + j step, c0s[i] + k step]``
-    (0 outside; ``phase`` is :func:`phase_split` of ``grid`` at ``step``, or at 1 to read the grid
-    itself ``step`` apart), in numpy's pairwise
+    (0 outside; ``phase`` is :func:`phase_split` of ``grid`` at ``step``, and then ``grid`` is not
+    read, or at 1 to read the grid itself ``step`` apart), in numpy's pairwise
     order. Olson's layout: each point adds its whole ``side x side`` block at once (contiguous
     rows of its phase); with <= 128 points point i goes to partial sum ``i % 8`` (``part``,
     (8, side, side)), as numpy's unrolled sum does; more points fall back to gathering each
     offset's values and :func:`pairwise_sum32`."""
-    h, w = grid.shape
     shift = 0  # steps are powers of 2: shift and mask floor-divide, no idiv per point
     while (1 << shift) < step:
         shift += 1
     mask = step - 1
+    split = phase.shape[0] > 1
     n = r0s.shape[0]
     zero = np.float32(0.0)
     if n > 128:
@@ -200,15 +213,13 @@ def _block_sums(
         for j in range(side):
             for k in range(side):
                 for i in range(n):
-                    r = r0s[i] + j * step
-                    c = c0s[i] + k * step
-                    vals[i] = grid[r, c] if 0 <= r < h and 0 <= c < w else zero
+                    vals[i] = _cell_value(grid, phase, shift, mask, r0s[i] + j * step, c0s[i] + k * step)
                 out[j, k] = pairwise_sum32(vals, 0, n)
         return
     n8 = n - n % 8 if n >= 8 else 0
     part[:] = zero
     for i in range(n8):
-        if phase.shape[0] == 1:  # not split: cells ``step`` apart in the grid itself
+        if not split:  # cells ``step`` apart in the grid itself
             _add_block(grid, r0s[i], c0s[i], side, step, part[i % 8])
         else:
             g = phase[r0s[i] & mask, c0s[i] & mask]
@@ -221,11 +232,8 @@ def _block_sums(
                 )
             else:
                 res = zero
-            for i in range(n8, n):
-                r = r0s[i] + j * step
-                c = c0s[i] + k * step
-                if 0 <= r < h and 0 <= c < w:  # outside adds 0: exact, so skipped
-                    res += grid[r, c]
+            for i in range(n8, n):  # outside adds 0: exact
+                res += _cell_value(grid, phase, shift, mask, r0s[i] + j * step, c0s[i] + k * step)
             out[j, k] = res
 
 
@@ -483,6 +491,25 @@ def _before(a: int, dy: int, dx: int, ba: int, bdy: int, bdx: int) -> bool:
 
 
 @njit(cache=True, nogil=True)
+def _angle_bounds(bound: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, wc: int) -> np.ndarray:
+    """Each angle's bound: :func:`score_candidates` of ``bound`` at the points' half-resolution
+    cells ``((rows0 + wc) >> 1, (cols0 + wc) >> 1)``, offset 0, the same sums, without the four
+    (A, N) index arrays (~130 KB written a search)."""
+    na, n = rows0.shape
+    h, w = bound.shape
+    ub = np.empty(na, dtype=np.float32)
+    vals = np.empty(n, dtype=np.float32)
+    nf = np.float32(n)
+    for a in range(na):
+        for i in range(n):
+            r = (rows0[a, i] + wc) >> 1
+            c = (cols0[a, i] + wc) >> 1
+            vals[i] = bound[r, c] if 0 <= r < h and 0 <= c < w else np.float32(0.0)
+        ub[a] = pairwise_sum32(vals, 0, n) / nf
+    return ub
+
+
+@njit(cache=True, nogil=True)
 def exhaustive_search(
     grid: np.ndarray,
     bound: np.ndarray,
@@ -521,9 +548,7 @@ def exhaustive_search(
         # each angle's points' window maxima (at half resolution: the max over a 2 x 2 block
         # of cells' windows), summed as the scores are: float32 rounding is monotone, so this is
         # at least every score at that angle, bit for bit (an exact bound)
-        at_angle = np.zeros((na, 3), dtype=np.int64)
-        at_angle[:, 0] = np.arange(na)
-        ub = score_candidates(bound, (rows0 + wc) >> 1, (cols0 + wc) >> 1, at_angle, 1)
+        ub = _angle_bounds(bound, rows0, cols0, wc)
         order = np.argsort(-ub)
     best = np.float32(-1.0)
     best_dist = 0
@@ -642,19 +667,21 @@ def max_pool(prev: np.ndarray, s: int) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def block_scores(
-    grid: np.ndarray, phase: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, lo: int, nb: int, step: int
+    phase: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, lo: int, nb: int, step: int
 ) -> np.ndarray:
     """(A, nb, nb) float32 scores of the whole top level of a coarse-to-fine search: at angle
     ``a`` the block offset (lo + j, lo + k) in units of ``step`` cells; the same sums, bit for
-    bit, as :func:`score_candidates` over all (a, j, k), accumulated point by point on the grid's
-    phases (Olson's layout, :func:`_block_sums`). ``phase`` is :func:`phase_split` of ``grid`` at
-    ``step``: always worth it, as reading a large submap in place ``step`` cells apart (loop
-    closure, step 16) missed the cache on nearly every read (a cold FR079 submap, 81 angles: ~1.0
-    -> ~0.7 ms); the caller may keep it (``LikelihoodField.phase``) while the grid is unchanged."""
+    bit, as :func:`score_candidates` over all (a, j, k) on the pooled grid, accumulated point by
+    point on its phases (Olson's layout, :func:`_block_sums`). ``phase`` is :func:`phase_split` of
+    that grid at ``step`` (only it is read): always worth it, as reading a large submap in place
+    ``step`` cells apart (loop closure, step 16) missed the cache on nearly every read (a cold
+    FR079 submap, 81 angles: ~1.0 -> ~0.7 ms); the caller may keep it (``LikelihoodField.phase``)
+    while the grid is unchanged, or build it without the grid (:func:`points_phase`)."""
     na, n = rows0.shape
     out = np.empty((na, nb, nb), dtype=np.float32)
     part = np.empty((8, nb, nb), dtype=np.float32)
     nf = np.float32(n)
+    grid = phase[0, 0]  # the grid itself when ``step`` is 1 (a single phase); else unread
     for a in range(na):
         _block_sums(grid, phase, step, rows0[a] + lo * step, cols0[a] + lo * step, nb, part, out[a])
         for j in range(nb):
@@ -714,14 +741,103 @@ def points_field(
         lo[d] = math.floor((mn - margin) / resolution) * resolution
         hi[d] = math.floor((mx + margin - lo[d]) / resolution) + 1
     field = np.zeros((int(hi[1]), int(hi[0])), dtype=np.float32)
+    rows, cols = points_cells(points, lo[0], lo[1], resolution)
+    splat_dense(field, rows, cols, kernel)
+    return field, lo[0], lo[1], rows, cols
+
+
+@njit(cache=True, nogil=True)
+def points_cells(
+    points: np.ndarray, ox: float, oy: float, resolution: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The (rows, cols) of the cells of (N, 2) ``points`` on a grid of origin (``ox``, ``oy``)."""
     n = points.shape[0]
     rows = np.empty(n, dtype=np.int64)
     cols = np.empty(n, dtype=np.int64)
     for i in range(n):
-        cols[i] = math.floor((points[i, 0] - lo[0]) / resolution)
-        rows[i] = math.floor((points[i, 1] - lo[1]) / resolution)
-    splat_dense(field, rows, cols, kernel)
-    return field, lo[0], lo[1], rows, cols
+        cols[i] = math.floor((points[i, 0] - ox) / resolution)
+        rows[i] = math.floor((points[i, 1] - oy) / resolution)
+    return rows, cols
+
+
+@njit(cache=True, nogil=True)
+def pooled_kernel(kernel: np.ndarray, step: int) -> np.ndarray:
+    """The splat kernel of a max-pooled level: ``out[d] = max over u, v in [0, step) of
+    kernel[d + (u, v)]`` for offsets d from ``-(R + step - 1)`` to ``R`` (``kernel``: (2 R + 1)^2,
+    centred). A field that is the maxima of ``kernel`` splatted at some cells, max-pooled over
+    ``step x step`` blocks (:func:`max_pool`'s levels: each cell the max over the block starting
+    there), is the maxima of this kernel at the same cells, its top-left corner ``R + step - 1``
+    cells up and left of the cell (:func:`points_pooled`)."""
+    size = kernel.shape[0]
+    out = np.zeros((size + step - 1, size + step - 1), dtype=kernel.dtype)
+    for i in range(size + step - 1):
+        for j in range(size + step - 1):
+            m = out[i, j]  # 0, of the kernel's type
+            for u in range(step):
+                for v in range(step):
+                    y, x = i + u - (step - 1), j + v - (step - 1)
+                    if 0 <= y < size and 0 <= x < size and kernel[y, x] > m:
+                        m = kernel[y, x]
+            out[i, j] = m
+    return out
+
+
+@njit(cache=True, nogil=True)
+def points_fit(rows: np.ndarray, cols: np.ndarray, radius: int, h: int, w: int) -> bool:
+    """Whether a kernel of ``radius`` splatted at every cell lies inside the ``h x w`` grid (then
+    :func:`points_pooled` and :func:`points_phase` give exactly the pooled levels of the field and
+    their phases: no weight was clipped at the grid's edge)."""
+    for i in range(rows.shape[0]):
+        if rows[i] < radius or cols[i] < radius or rows[i] + radius >= h or cols[i] + radius >= w:
+            return False
+    return True
+
+
+@njit(cache=True, nogil=True)
+def points_pooled(
+    rows: np.ndarray, cols: np.ndarray, kernel: np.ndarray, step: int, h: int, w: int
+) -> np.ndarray:
+    """``pooled[level]`` (``step = 2^level``, :func:`max_pool`'s chain) of the ``h x w`` field
+    made of ``kernel`` splatted at the cells ``rows`` / ``cols``, without the field: the maxima of
+    :func:`pooled_kernel` at those cells, which is exact when :func:`points_fit` (the field's own
+    splats were not clipped). A few hundred small splats instead of two passes over the grid a level
+    (a scan's field: ~350 x 320 cells for ~180 returns)."""
+    k = pooled_kernel(kernel, step)
+    off = kernel.shape[0] // 2 + step - 1
+    size = k.shape[0]
+    out = np.zeros((h, w), dtype=kernel.dtype)
+    for i in range(rows.shape[0]):
+        r0, c0 = rows[i] - off, cols[i] - off
+        for y in range(max(-r0, 0), min(h - r0, size)):
+            for x in range(max(-c0, 0), min(w - c0, size)):
+                v, kv = out[r0 + y, c0 + x], k[y, x]
+                out[r0 + y, c0 + x] = kv if kv > v else v
+    return out
+
+
+@njit(cache=True, nogil=True)
+def points_phase(
+    rows: np.ndarray, cols: np.ndarray, kernel: np.ndarray, step: int, h: int, w: int
+) -> np.ndarray:
+    """:func:`phase_split` at ``step`` of :func:`points_pooled` (the same conditions), splatted
+    straight into the phases: the pooled grid is never built."""
+    k = pooled_kernel(kernel, step)
+    off = kernel.shape[0] // 2 + step - 1
+    size = k.shape[0]
+    shift = 0
+    while (1 << shift) < step:
+        shift += 1
+    mask = step - 1
+    phase = np.zeros((step, step, -(-h // step), -(-w // step)), dtype=kernel.dtype)
+    for i in range(rows.shape[0]):
+        r0, c0 = rows[i] - off, cols[i] - off
+        for y in range(max(-r0, 0), min(h - r0, size)):
+            r = r0 + y
+            for x in range(max(-c0, 0), min(w - c0, size)):
+                c = c0 + x
+                v, kv = phase[r & mask, c & mask, r >> shift, c >> shift], k[y, x]
+                phase[r & mask, c & mask, r >> shift, c >> shift] = kv if kv > v else v
+    return phase
 
 
 @njit(cache=True, nogil=True)

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.slam import kernels
-from nav.slam.beam_search import best_candidate, score_children
+from nav.slam.beam_search import beam_search, keep_best_reference
 from nav.slam.branch_and_bound import branch_and_bound_search
 from nav.slam.field import LikelihoodField
 from nav.types import Pose2D, wrap_angle
@@ -259,8 +259,8 @@ def _correlative(
             cand = kids[inside]  # a block meeting the window has at least one child that does
         rows, cols = (top_rows, top_cols) if level == top else (rows0, cols0)
         score = score_candidates_reference(field, level, rows, cols, cand, s)
-        if level > 0 and len(cand) > window.beam:
-            keep = np.argpartition(-score, window.beam)[: window.beam]
+        if level > 0:
+            keep = keep_best_reference(score, window.beam)
             cand = cand[keep]
     # tie-break towards the prior (smallest offset) for determinism
     dist = np.abs(cand[:, 1]) + np.abs(cand[:, 2]) + np.abs(cand[:, 0] - na)
@@ -284,18 +284,12 @@ def _beam(
     wc: int,
     separation: float,
 ) -> tuple[Pose2D, float, float]:
-    """The compiled coarse-to-fine beam: every block of the top level scored at once
-    (:func:`nav.slam.kernels.block_scores`), then a level at a time the ``beam`` best kept (numpy's
-    ``argpartition``, as the reference) and their children scored
-    (:func:`nav.slam.beam_search.score_children`); the best of the last level
-    (:func:`nav.slam.beam_search.best_candidate`). ``cell_args``: :func:`_cell_args` of the
-    search's points (the top level's thinned ones are rotated on their own, the same cells as
-    ``rows0`` / ``cols0``'s columns, ~5x cheaper than gathering those)."""
+    """The compiled coarse-to-fine beam (:func:`nav.slam.beam_search.beam_search`) on the field's
+    pooled levels. ``cell_args``: :func:`_cell_args` of the search's points (the top level's
+    thinned ones are rotated on their own, the same cells as ``rows0`` / ``cols0``'s columns, ~5x
+    cheaper than gathering those)."""
     top = window.levels
     field.ensure_levels(top)
-    s = 1 << top
-    lo = math.floor(-wc / s)
-    nb = math.floor(wc / s) - lo + 1
     pts = cell_args[0]
     limit = window.top_level_points
     if limit is None or pts.shape[0] <= limit:
@@ -303,15 +297,11 @@ def _beam(
     else:
         top_pts = np.take(pts, _thinned(pts.shape[0], limit), axis=0)
         top_rows, top_cols = kernels.rotated_cells(top_pts, *cell_args[1:])
-    score = kernels.block_scores(field.pooled[top], field.phase(top), top_rows, top_cols, lo, nb, s).ravel()
-    cand = _top_candidates(len(thetas), lo, nb)  # (C, 3): `score`'s order
-    for level in range(top - 1, -1, -1):
-        if len(cand) > window.beam:
-            keep = np.argpartition(-score, window.beam)[: window.beam]
-            cand = cand[keep]
-        cand, score = score_children(field.pooled[level], rows0, cols0, cand, 1 << level, wc)
-    a, dy, dx, best, runner_up = best_candidate(cand, score, na, separation, field.resolution)
     res = field.resolution
+    a, dy, dx, best, runner_up = beam_search(
+        tuple(field.pooled[:top]), field.phase(top), rows0, cols0, top_rows, top_cols,
+        wc, window.beam, na, separation, res,
+    )  # fmt: skip
     pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))
     return pose, best, runner_up
 

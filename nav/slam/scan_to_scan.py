@@ -20,8 +20,10 @@ import math
 
 import numpy as np
 from numba import njit
+from numba.typed import List
 
 from nav.slam import kernels
+from nav.slam.beam_search import beam_search
 from nav.slam.field import POINTS_FIELD_MARGIN, LikelihoodField, _halved_window_kernels, _window_kernel
 from nav.slam.matcher import ScanMatchError, _angle_offsets, wide_fallback
 from nav.slam.system import SlamOptions
@@ -47,6 +49,9 @@ class ScanToScanMatcher:
         self._wc = math.ceil(self.window.linear_search_window / self.resolution)
         self._kernel = _window_kernel(self.sigma, self.resolution, 0)
         self._halved = _halved_window_kernels(self.sigma, self.resolution, self._wc)
+        ww = self.wide_window
+        self._wide_na = math.ceil(ww.angular_search_window / ww.angular_step)
+        self._wide_wc = math.ceil(ww.linear_search_window / self.resolution)
 
     def match(
         self, reference: LaserScan, reference_points: np.ndarray, points: np.ndarray, prior: Pose2D
@@ -89,9 +94,22 @@ class ScanToScanMatcher:
         pose = Pose2D(x, y, theta)
         if score >= self.minimum_score:
             return pose, score
-        f = LikelihoodField(grid, np.array([ox, oy]), self.resolution)
-        f.sigma = self.sigma
-        return wide_fallback(f, kept, prior, w, self.wide_window, Pose2D(cx, cy, ct), best, pose, score, r)
+        ww = self.wide_window
+        if ww.branch_and_bound or ww.levels == 0:  # the beam is compiled in one call, these are not
+            f = LikelihoodField(grid, np.array([ox, oy]), self.resolution)
+            f.sigma = self.sigma
+            return wide_fallback(f, kept, prior, w, ww, Pose2D(cx, cy, ct), best, pose, score, r)
+        thetas = prior.theta + _angle_offsets(ww.angular_step, self._wide_na)
+        out, wide_score = wide_match(
+            grid, ox, oy, self.resolution,
+            np.ascontiguousarray(reference_points, dtype=np.float64), self._kernel,
+            kept, np.cos(thetas), np.sin(thetas), thetas, prior.x, prior.y,
+            self._wide_wc, ww.levels, ww.beam, ww.max_points,
+            -1 if ww.top_level_points is None else ww.top_level_points,
+            np.array([cx, cy, ct]), np.array([x, y, theta]), score,
+            r.occupied_space_weight, r.translation_weight, r.rotation_weight, r.max_iterations, r.tolerance,
+        )  # fmt: skip
+        return Pose2D(float(out[0]), float(out[1]), float(out[2])), wide_score
 
 
 @njit(cache=True, nogil=True)
@@ -172,3 +190,84 @@ def narrow_match(
         occupied_weight, wt, wr, max_iterations, tolerance,
     )  # fmt: skip
     return grid, ox, oy, pts, coarse[0], coarse[1], coarse[2], best, x[0], x[1], x[2], score
+
+
+@njit(cache=True, nogil=True)
+def wide_match(
+    grid: np.ndarray,
+    ox: float,
+    oy: float,
+    resolution: float,
+    reference_points: np.ndarray,
+    kernel: np.ndarray,
+    kept: np.ndarray,
+    cos_t: np.ndarray,
+    sin_t: np.ndarray,
+    thetas: np.ndarray,
+    px: float,
+    py: float,
+    wc: int,
+    levels: int,
+    beam: int,
+    max_points: int,
+    top_level_points: int,
+    coarse: np.ndarray,
+    pose: np.ndarray,
+    score: float,
+    occupied_weight: float,
+    wt: float,
+    wr: float,
+    max_iterations: int,
+    tolerance: float,
+) -> tuple[np.ndarray, float]:
+    """``matcher.wide_fallback`` of a narrow match (its search's pose ``coarse`` and refined
+    ``pose`` / ``score``; ``kept``: the points it matched) with the wide window's beam, in one call:
+    the search's points (``max_points`` of ``kept``, thinned) at the window's angles (``thetas``,
+    their cosines and sines given), the top level's (``top_level_points`` of those; -1: all), the
+    pooled levels (:func:`nav.slam.kernels.points_pooled` and :func:`~nav.slam.kernels.points_phase`
+    from the reference's cells, exactly ``LikelihoodField``'s when no splat was clipped at the
+    grid's edge, else ``max_pool`` and ``phase_split`` as the field does), the beam search, and the
+    refinement of its pose when it is not the narrow search's. Returns the better refined pose and
+    its score."""
+    n = kept.shape[0]
+    pts = kept
+    if n > max_points:
+        idx = _thinned(n, max_points)
+        pts = np.empty((max_points, 2))
+        for i in range(max_points):
+            pts[i] = kept[idx[i]]
+    rows0, cols0 = kernels.rotated_cells(pts, cos_t, sin_t, px, py, ox, oy, resolution)
+    top_rows, top_cols = rows0, cols0
+    if 0 <= top_level_points < pts.shape[0]:
+        idx = _thinned(pts.shape[0], top_level_points)
+        top_pts = np.empty((top_level_points, 2))
+        for i in range(top_level_points):
+            top_pts[i] = pts[idx[i]]
+        top_rows, top_cols = kernels.rotated_cells(top_pts, cos_t, sin_t, px, py, ox, oy, resolution)
+    h, w = grid.shape
+    rows, cols = kernels.points_cells(reference_points, ox, oy, resolution)
+    pooled = List()
+    pooled.append(grid)
+    if kernels.points_fit(rows, cols, kernel.shape[0] // 2, h, w):
+        for level in range(1, levels):
+            pooled.append(kernels.points_pooled(rows, cols, kernel, 1 << level, h, w))
+        phase = kernels.points_phase(rows, cols, kernel, 1 << levels, h, w)
+    else:  # a splat clipped at the edge: pool the field itself
+        g = grid
+        for level in range(1, levels + 1):
+            g = kernels.max_pool(g, 1 << (level - 1))
+            if level < levels:
+                pooled.append(g)
+        phase = kernels.phase_split(g, 1 << levels)
+    centre = (thetas.shape[0] - 1) // 2
+    a, dy, dx, _, _ = beam_search(
+        pooled, phase, rows0, cols0, top_rows, top_cols, wc, beam, centre, math.inf, resolution
+    )
+    wide = np.array([px + dx * resolution, py + dy * resolution, kernels._wrap(thetas[a])])
+    if wide[0] != coarse[0] or wide[1] != coarse[1] or wide[2] != coarse[2]:
+        x, wide_score = kernels.gauss_newton(
+            grid, ox, oy, resolution, kept, wide, wide, occupied_weight, wt, wr, max_iterations, tolerance
+        )
+        if wide_score > score:
+            return x, wide_score
+    return pose, score
