@@ -256,7 +256,9 @@ def test_pooled_levels_of_a_points_field_are_splats_of_the_pooled_kernel(seed: i
     for level in range(1, 5):
         step = 1 << level
         assert np.array_equal(kernels.points_pooled(rows, cols, kernel, step, h, w), field.pooled[level])
-        assert np.array_equal(kernels.points_phase(rows, cols, kernel, step, h, w), field.phase(level))
+        for pad in (0, 6):
+            got = kernels.points_phase(rows, cols, kernel, step, h, w, pad)
+            assert np.array_equal(got, field.phase(level, pad))
     assert not kernels.points_fit(rows, cols, 11, h, w)  # a kernel wider than the margin is clipped
 
 
@@ -289,14 +291,19 @@ def test_compiled_rotated_cells_equal_numpys() -> None:
     assert np.array_equal(rows, cell[..., 1]) and np.array_equal(cols, cell[..., 0])
 
 
-@pytest.mark.parametrize("size", [40, 600])
-def test_compiled_top_level_scores_equal_the_reference(size: int) -> None:
-    # a scan-sized and a submap-sized grid, both split into phases, points past every edge
-    rng = np.random.default_rng(size)
+@pytest.mark.parametrize(
+    ("size", "n", "pad"), [(40, 100, 0), (600, 100, 0), (40, 100, 6), (600, 24, 6), (90, 37, 9), (90, 200, 6)]
+)
+def test_compiled_top_level_scores_equal_the_reference(size: int, n: int, pad: int) -> None:
+    # a scan-sized and a submap-sized grid, both split into phases, unpadded and padded by the
+    # block count or more; points past every edge and points far outside
+    rng = np.random.default_rng(size + n)
     field = LikelihoodField(rng.random((size, size)).astype(np.float32), np.zeros(2), 0.05, levels=2)
-    rows0 = rng.integers(-8, size + 8, (3, 100))
-    cols0 = rng.integers(-8, size + 8, (3, 100))
-    fast = kernels.block_scores(field.phase(2), rows0, cols0, -3, 6, 4)
+    rows0 = rng.integers(-8, size + 8, (3, n))
+    cols0 = rng.integers(-8, size + 8, (3, n))
+    rows0[0, :5] = -100  # blocks that miss the grid
+    cols0[1, 3:9] = size + 60
+    fast = kernels.block_scores(field.phase(2, pad), rows0, cols0, -3, 6, 4, pad)
     a_idx, by, bx = np.meshgrid(np.arange(3), np.arange(-3, 3), np.arange(-3, 3), indexing="ij")
     cand = np.column_stack((a_idx.ravel(), by.ravel(), bx.ravel()))
     ref = score_candidates_reference(field, 2, rows0, cols0, cand, 4)
@@ -405,16 +412,21 @@ def test_compiled_window_moments_and_surface_lines_equal_numpys_bit_for_bit(seed
     assert surface_lines(clouds[0])[1].mean() > 0.5  # walls: most points are on a line
 
 
-@pytest.mark.parametrize(("shape", "step"), [((37, 53), 4), ((64, 32), 8), ((5, 3), 16), ((9, 11), 1)])
-def test_compiled_phase_split_equals_numpys_strided_slices(shape: tuple[int, int], step: int) -> None:
+@pytest.mark.parametrize(
+    ("shape", "step", "pad"),
+    [((37, 53), 4, 0), ((64, 32), 8, 0), ((5, 3), 16, 0), ((9, 11), 1, 0), ((37, 53), 4, 6)],
+)
+def test_compiled_phase_split_equals_numpys_strided_slices(
+    shape: tuple[int, int], step: int, pad: int
+) -> None:
     grid = np.random.default_rng(step).random(shape).astype(np.float32)
-    phase = kernels.phase_split(grid, step)
+    phase = kernels.phase_split(grid, step, pad)
     h, w = -(-shape[0] // step), -(-shape[1] // step)
-    assert phase.shape == (step, step, h, w)
+    assert phase.shape == (step, step, h + 2 * pad, w + 2 * pad)
     padded = np.pad(grid, ((0, h * step - shape[0]), (0, w * step - shape[1])))
     for pr in range(step):
         for pc in range(step):
-            assert np.array_equal(phase[pr, pc], padded[pr::step, pc::step])
+            assert np.array_equal(phase[pr, pc], np.pad(padded[pr::step, pc::step], pad))
 
 
 def test_the_3x3_solve_equals_numpys_bit_for_bit() -> None:

@@ -203,6 +203,15 @@ def best_candidate(
 
 
 @njit(cache=True, nogil=True)
+def top_level_blocks(wc: int, top: int) -> tuple[int, int]:
+    """The first block offset and the number of blocks a side of a +-``wc`` cell window's level
+    ``top`` (blocks of ``2^top`` cells)."""
+    s = 1 << top
+    lo = -((wc + s - 1) // s)  # floor(-wc / s)
+    return lo, wc // s - lo + 1
+
+
+@njit(cache=True, nogil=True)
 def top_candidates(angles: int, lo: int, nb: int) -> np.ndarray:
     """Every ``(angle index, by, bx)`` of a coarse-to-fine search's top level, blocks ``lo`` ..
     ``lo + nb - 1``, in :func:`nav.slam.kernels.block_scores`' order."""
@@ -220,6 +229,7 @@ def top_candidates(angles: int, lo: int, nb: int) -> np.ndarray:
 def beam_search(
     levels: tuple | list,  # the pooled grids below the top: a tuple, or a numba typed List
     top_phase: np.ndarray,
+    pad: int,
     rows0: np.ndarray,
     cols0: np.ndarray,
     top_rows: np.ndarray,
@@ -238,9 +248,8 @@ def beam_search(
     index)."""
     top = len(levels)
     s = 1 << top
-    lo = -((wc + s - 1) // s)  # floor(-wc / s)
-    nb = wc // s - lo + 1
-    score = block_scores(top_phase, top_rows, top_cols, lo, nb, s).ravel()
+    lo, nb = top_level_blocks(wc, top)
+    score = block_scores(top_phase, top_rows, top_cols, lo, nb, s, pad).ravel()
     cand = top_candidates(top_rows.shape[0], lo, nb)
     for level in range(top - 1, -1, -1):
         keep = keep_best(score, beam)

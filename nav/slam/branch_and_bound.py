@@ -46,7 +46,7 @@ def branch_and_bound_search(
     s = 1 << top
     lo = -((wc + s - 1) // s)  # floor(-wc / s)
     nb = wc // s - lo + 1
-    top_scores = block_scores(phase_split(pooled[top], s), rows0, cols0, lo, nb, s).ravel()
+    top_scores = block_scores(phase_split(pooled[top], s, nb), rows0, cols0, lo, nb, s, nb).ravel()
     order = np.argsort(-top_scores, kind="mergesort")
     centre = (na - 1) // 2
     nf = np.float32(n)

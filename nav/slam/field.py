@@ -104,7 +104,7 @@ class LikelihoodField:
         # per pooled level, its phase split (kernels.phase_split) for the top level of a search:
         # a finished submap's field is searched for many nodes' loop closures, and splitting a
         # ~200k-cell field cost half of each top level (FR079: 0.34 of 0.67 ms)
-        self._phases: dict[int, np.ndarray] = {}
+        self._phases: dict[tuple[int, int], np.ndarray] = {}
         # the cells whose kernels make up the whole field, when known (built from cells): its
         # window maxima are then bounded by splatting a spread kernel there, cheaper than a pass
         # over the grid
@@ -193,13 +193,13 @@ class LikelihoodField:
             s = 1 << (len(self.pooled) - 1)
             self.pooled.append(kernels.max_pool(self.pooled[-1], s))
 
-    def phase(self, level: int) -> np.ndarray:
-        """:func:`nav.slam.kernels.phase_split` of ``pooled[level]`` at ``2^level`` (built once,
-        dropped when :meth:`splat` changes the field)."""
-        if level not in self._phases:
+    def phase(self, level: int, pad: int = 0) -> np.ndarray:
+        """:func:`nav.slam.kernels.phase_split` of ``pooled[level]`` at ``2^level`` with ``pad``
+        (built once, dropped when :meth:`splat` changes the field)."""
+        if (level, pad) not in self._phases:
             self.ensure_levels(level)
-            self._phases[level] = kernels.phase_split(self.pooled[level], 1 << level)
-        return self._phases[level]
+            self._phases[level, pad] = kernels.phase_split(self.pooled[level], 1 << level, pad)
+        return self._phases[level, pad]
 
     def window_max(self, half: int) -> np.ndarray:
         """The exhaustive search's per-angle bound, at half resolution: cell (r, c)'s entry is

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nav.slam import kernels
-from nav.slam.beam_search import beam_search, keep_best_reference
+from nav.slam.beam_search import beam_search, keep_best_reference, top_level_blocks
 from nav.slam.branch_and_bound import branch_and_bound_search
 from nav.slam.field import LikelihoodField
 from nav.types import Pose2D, wrap_angle
@@ -298,8 +298,9 @@ def _beam(
         top_pts = np.take(pts, _thinned(pts.shape[0], limit), axis=0)
         top_rows, top_cols = kernels.rotated_cells(top_pts, *cell_args[1:])
     res = field.resolution
+    pad = top_level_blocks(wc, top)[1]
     a, dy, dx, best, runner_up = beam_search(
-        tuple(field.pooled[:top]), field.phase(top), rows0, cols0, top_rows, top_cols,
+        tuple(field.pooled[:top]), field.phase(top, pad), pad, rows0, cols0, top_rows, top_cols,
         wc, window.beam, na, separation, res,
     )  # fmt: skip
     pose = Pose2D(prior.x + dx * res, prior.y + dy * res, float(wrap_angle(thetas[a])))

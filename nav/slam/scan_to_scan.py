@@ -23,7 +23,7 @@ from numba import njit
 from numba.typed import List
 
 from nav.slam import kernels
-from nav.slam.beam_search import beam_search
+from nav.slam.beam_search import beam_search, top_level_blocks
 from nav.slam.field import POINTS_FIELD_MARGIN, LikelihoodField, _halved_window_kernels, _window_kernel
 from nav.slam.matcher import ScanMatchError, _angle_offsets, wide_fallback
 from nav.slam.system import SlamOptions
@@ -248,20 +248,21 @@ def wide_match(
     rows, cols = kernels.points_cells(reference_points, ox, oy, resolution)
     pooled = List()
     pooled.append(grid)
+    pad = top_level_blocks(wc, levels)[1]
     if kernels.points_fit(rows, cols, kernel.shape[0] // 2, h, w):
         for level in range(1, levels):
             pooled.append(kernels.points_pooled(rows, cols, kernel, 1 << level, h, w))
-        phase = kernels.points_phase(rows, cols, kernel, 1 << levels, h, w)
+        phase = kernels.points_phase(rows, cols, kernel, 1 << levels, h, w, pad)
     else:  # a splat clipped at the edge: pool the field itself
         g = grid
         for level in range(1, levels + 1):
             g = kernels.max_pool(g, 1 << (level - 1))
             if level < levels:
                 pooled.append(g)
-        phase = kernels.phase_split(g, 1 << levels)
+        phase = kernels.phase_split(g, 1 << levels, pad)
     centre = (thetas.shape[0] - 1) // 2
     a, dy, dx, _, _ = beam_search(
-        pooled, phase, rows0, cols0, top_rows, top_cols, wc, beam, centre, math.inf, resolution
+        pooled, phase, pad, rows0, cols0, top_rows, top_cols, wc, beam, centre, math.inf, resolution
     )
     wide = np.array([px + dx * resolution, py + dy * resolution, kernels._wrap(thetas[a])])
     if wide[0] != coarse[0] or wide[1] != coarse[1] or wide[2] != coarse[2]:
