@@ -25,6 +25,8 @@ from numba import njit
 
 from nav.slam.kernels import _block_sums, block_scores
 
+_NO_BOUNDS = np.zeros(0, dtype=np.float32)  # score_children: every parent's children
+
 
 @njit(cache=True, nogil=True)
 def keep_best(score: np.ndarray, beam: int) -> np.ndarray:
@@ -90,14 +92,26 @@ def keep_best_reference(score: np.ndarray, beam: int) -> np.ndarray:
 
 @njit(cache=True, nogil=True)
 def score_children(
-    grid: np.ndarray, rows0: np.ndarray, cols0: np.ndarray, parents: np.ndarray, step: int, wc: int
+    grid: np.ndarray,
+    rows0: np.ndarray,
+    cols0: np.ndarray,
+    parents: np.ndarray,
+    step: int,
+    wc: int,
+    bounds: np.ndarray = _NO_BOUNDS,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The children ``(angle, by, bx)`` of ``parents`` one level down, ``(2 by + (0, 0, 1, 1), 2 bx +
     (0, 1, 0, 1))`` in that order (blocks of ``step`` cells on ``grid``, the pooled level they are
     scored on), those whose block meets the +-``wc`` cell window, and their float32 mean scores,
     bit for bit :func:`nav.slam.kernels.score_candidates`' (``rows0`` / ``cols0`` (A, N): the
     points' cells at each angle and zero offset). Reference: the numpy split and scores of
-    ``matcher._correlative`` (``compiled=False``)."""
+    ``matcher._correlative`` (``compiled=False``).
+
+    With ``bounds`` (the parents' own scores, one level up: at least each child's) the children of
+    a parent whose bound is below the best child scored so far are left out, the parent with the
+    highest bound first: what is left holds every child scoring the best, in the same order, so the
+    pick (:func:`best_candidate` without a runner-up) is the same (branch-and-bound's rule, on the
+    beam's last level)."""
     n = rows0.shape[1]
     nf = np.float32(n)
     kids = np.empty((4 * parents.shape[0], 3), dtype=np.int64)
@@ -108,25 +122,45 @@ def score_children(
     sums = np.empty((2, 2), dtype=np.float32)
     r0s = np.empty(n, dtype=np.int64)
     c0s = np.empty(n, dtype=np.int64)
+    prune = bounds.shape[0] > 0
+    first = np.argmax(bounds) if prune else -1
+    best = -np.inf
+    first_sums = np.zeros((2, 2), dtype=np.float32)
     m = 0
-    for k in range(parents.shape[0]):
+    for t in range(parents.shape[0] + 1):
+        k = first if t == 0 else t - 1  # the highest bound first (to set the best), then all in order
+        if k < 0 or (prune and bounds[k] < best):
+            continue
         a, by, bx = parents[k, 0], parents[k, 1], parents[k, 2]
-        dy, dx = 2 * by * step, 2 * bx * step
-        if n <= 128:
-            _children_sums(grid, rows0[a], cols0[a], dy, dx, step, part4, sums)
+        if t > 0 and k == first:  # scored first: its sums are kept
+            sums[:] = first_sums
         else:
-            for i in range(n):
-                r0s[i] = rows0[a, i] + dy
-                c0s[i] = cols0[a, i] + dx
-            _block_sums(grid, in_place, step, r0s, c0s, 2, part, sums)
+            dy, dx = 2 * by * step, 2 * bx * step
+            if n <= 128:
+                _children_sums(grid, rows0[a], cols0[a], dy, dx, step, part4, sums)
+            else:
+                for i in range(n):
+                    r0s[i] = rows0[a, i] + dy
+                    c0s[i] = cols0[a, i] + dx
+                _block_sums(grid, in_place, step, r0s, c0s, 2, part, sums)
         for q in range(4):
             cy, cx = 2 * by + q // 2, 2 * bx + q % 2
-            lo_y, lo_x = cy * step, cx * step
-            if lo_y + step - 1 >= -wc and lo_y <= wc and lo_x + step - 1 >= -wc and lo_x <= wc:
-                kids[m, 0], kids[m, 1], kids[m, 2] = a, cy, cx
-                scores[m] = sums[q // 2, q % 2] / nf
-                m += 1
+            if _meets(cy * step, cx * step, step, wc):
+                sc = sums[q // 2, q % 2] / nf
+                best = max(best, sc)
+                if t > 0:
+                    kids[m, 0], kids[m, 1], kids[m, 2] = a, cy, cx
+                    scores[m] = sc
+                    m += 1
+        if t == 0:
+            first_sums[:] = sums
     return kids[:m], scores[:m]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _meets(lo_y: int, lo_x: int, step: int, wc: int) -> bool:
+    """Whether the block of ``step`` cells from offset (lo_y, lo_x) meets the +-``wc`` window."""
+    return lo_y + step - 1 >= -wc and lo_y <= wc and lo_x + step - 1 >= -wc and lo_x <= wc
 
 
 @njit(cache=True, nogil=True, inline="always")
@@ -253,5 +287,9 @@ def beam_search(
     cand = top_candidates(top_rows.shape[0], lo, nb)
     for level in range(top - 1, -1, -1):
         keep = keep_best(score, beam)
-        cand, score = score_children(levels[level], rows0, cols0, cand[keep], 1 << level, wc)
+        # the last level without a runner-up asks only for the best child, and the parents' scores
+        # bound their children's when they summed the same points (not the top level's few)
+        same_points = level + 1 < top or top_rows.shape[1] == rows0.shape[1]
+        bounds = score[keep] if level == 0 and separation == math.inf and same_points else _NO_BOUNDS
+        cand, score = score_children(levels[level], rows0, cols0, cand[keep], 1 << level, wc, bounds)
     return best_candidate(cand, score, centre, separation, resolution)

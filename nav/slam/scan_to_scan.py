@@ -238,12 +238,14 @@ def wide_match(
             pts[i] = kept[idx[i]]
     rows0, cols0 = kernels.rotated_cells(pts, cos_t, sin_t, px, py, ox, oy, resolution)
     top_rows, top_cols = rows0, cols0
-    if 0 <= top_level_points < pts.shape[0]:
+    if 0 <= top_level_points < pts.shape[0]:  # those points' columns of the cells
         idx = _thinned(pts.shape[0], top_level_points)
-        top_pts = np.empty((top_level_points, 2))
-        for i in range(top_level_points):
-            top_pts[i] = pts[idx[i]]
-        top_rows, top_cols = kernels.rotated_cells(top_pts, cos_t, sin_t, px, py, ox, oy, resolution)
+        top_rows = np.empty((rows0.shape[0], top_level_points), dtype=np.int64)
+        top_cols = np.empty((rows0.shape[0], top_level_points), dtype=np.int64)
+        for a in range(rows0.shape[0]):
+            for i in range(top_level_points):
+                top_rows[a, i] = rows0[a, idx[i]]
+                top_cols[a, i] = cols0[a, idx[i]]
     h, w = grid.shape
     rows, cols = kernels.points_cells(reference_points, ox, oy, resolution)
     pooled = List()
