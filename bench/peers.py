@@ -70,6 +70,9 @@ from robot.profiles import load_profile
 from robot.sim import SimDriver, SimOptions, World
 
 ROUNDS = 7
+# a round of 50 scan matches is ~10-15 ms, so the shared machine's noise moves 7 rounds' median
+# by ~5 % (stop 38: one build's relation-pair ratio 1.04-1.17 over three runs); 31 rounds cost ~1 s
+MATCH_ROUNDS = 31
 WILLOW = ROS_MAPS / "navigation_stage/willow-full-0.05.yaml"
 DEN312D = MOVINGAI / "mapf/den312d"
 SCENARIOS = 20
@@ -344,7 +347,7 @@ def _match_row(
         def run_theirs() -> None:
             estimates["karto"] = [theirs.match(ref, cur) for ref, cur in kscans]
 
-        a_ms, b_ms = alternating_medians(run_ours, run_theirs)
+        a_ms, b_ms = alternating_medians(run_ours, run_theirs, MATCH_ROUNDS)
     else:
         a_ms, b_ms = _single(run_ours), None
     note = "per match"

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from nav.slam.beam_search import top_level_blocks
 from nav.slam.kernels import _before, _block_sums, block_scores, phase_split
 
 
@@ -44,8 +45,7 @@ def branch_and_bound_search(
     na, n = rows0.shape
     top = len(pooled) - 1
     s = 1 << top
-    lo = -((wc + s - 1) // s)  # floor(-wc / s)
-    nb = wc // s - lo + 1
+    lo, nb = top_level_blocks(wc, top)
     top_scores = block_scores(phase_split(pooled[top], s, nb), rows0, cols0, lo, nb, s, nb).ravel()
     order = np.argsort(-top_scores, kind="mergesort")
     centre = (na - 1) // 2

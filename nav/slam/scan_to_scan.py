@@ -11,7 +11,9 @@ refinement, and below ``wide_search_minimum_score`` the wide re-search
 Everything up to the refined narrow match is one compiled call (:func:`narrow_match`) of the same
 kernels the separate steps call, so the result is theirs bit for bit (the tests compare the two):
 as separate calls, their Python (a dozen small numpy operations, five dispatches, the field object)
-was ~15 % of a match.
+was ~15 % of a match. The wide re-search is a second one (:func:`wide_match`), which builds the
+pooled levels it needs from the reference's cells rather than from the field (two passes over the
+grid a level).
 """
 
 from __future__ import annotations
