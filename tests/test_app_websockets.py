@@ -44,16 +44,17 @@ def test_drive_forward_then_deadman_stops(live_server) -> None:
     start = session.pose
     with connect(f"{live_server.ws_url}/ws/teleop") as ws:
         assert hello(ws)["driving"] is True
-        drive(ws, 1.0, vx=0.2)
-        moved_while_driving = session.pose.distance_to(start)
+        # the commands move the robot (until 0.12 m: a fixed second of driving covered only 0.06 m
+        # when the session loop was starved on a loaded machine)
+        assert drive_until(ws, lambda: session.pose.distance_to(start) > 0.12)
+        at_last_command = session.pose.distance_to(start)
         assert session.modes.mode.value == "teleop"
         time.sleep(0.8)  # > deadman 0.5 s without commands
         assert abs(session.last_command.vx) < 1e-9
         assert abs(session.velocity.vx) < 0.02
-        travelled = session.pose.distance_to(start)
-    assert 0.12 < moved_while_driving < 0.26, moved_while_driving
-    # 1 s of commands + the 0.5 s deadman at 0.2 m/s + braking, with a tick of scheduling slack
-    assert travelled < 0.36
+        coasted = session.pose.distance_to(start) - at_last_command
+    # the 0.5 s deadman at 0.2 m/s + braking, with a tick of scheduling slack
+    assert coasted < 0.2, coasted
 
 
 def test_malformed_message_errors_and_stops_but_keeps_connection(live_server) -> None:
