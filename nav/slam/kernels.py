@@ -420,8 +420,16 @@ def _splat_one(field: np.ndarray, r: int, c: int, kernel: np.ndarray) -> None:
                 v, kv = field[r0 + j, c0 + k], kernel[j, k]
                 field[r0 + j, c0 + k] = kv if kv > v else v
         return
-    for j in range(max(-r0, 0), min(h - r0, 2 * rad + 1)):
-        for k in range(max(-c0, 0), min(w - c0, 2 * rad + 1)):
+    _splat_clipped(field, r0, c0, kernel, 2 * rad + 1)
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _splat_clipped(field: np.ndarray, r0: int, c0: int, kernel: np.ndarray, size: int) -> None:
+    """``field[r0 + j, c0 + k] = max(field, kernel[j, k])`` for j, k < ``size`` (the kernel's
+    top-left corner at (r0, c0)), the part outside the grid skipped."""
+    h, w = field.shape
+    for j in range(max(-r0, 0), min(h - r0, size)):
+        for k in range(max(-c0, 0), min(w - c0, size)):
             v, kv = field[r0 + j, c0 + k], kernel[j, k]
             field[r0 + j, c0 + k] = kv if kv > v else v
 
@@ -440,10 +448,7 @@ def _splat_rows8(field: np.ndarray, r: int, c: int, kernel8: np.ndarray, size: i
                 v, kv = field[r0 + j, c0 + k], kernel8[j, k]
                 field[r0 + j, c0 + k] = kv if kv > v else v
         return
-    for j in range(max(-r0, 0), min(h - r0, size)):
-        for k in range(max(-c0, 0), min(w - c0, size)):
-            v, kv = field[r0 + j, c0 + k], kernel8[j, k]
-            field[r0 + j, c0 + k] = kv if kv > v else v
+    _splat_clipped(field, r0, c0, kernel8, size)
 
 
 @njit(cache=True, nogil=True)
@@ -879,11 +884,7 @@ def points_pooled(
     size = k.shape[0]
     out = np.zeros((h, w), dtype=kernel.dtype)
     for i in range(rows.shape[0]):
-        r0, c0 = rows[i] - off, cols[i] - off
-        for y in range(max(-r0, 0), min(h - r0, size)):
-            for x in range(max(-c0, 0), min(w - c0, size)):
-                v, kv = out[r0 + y, c0 + x], k[y, x]
-                out[r0 + y, c0 + x] = kv if kv > v else v
+        _splat_clipped(out, rows[i] - off, cols[i] - off, k, size)
     return out
 
 
